@@ -1,0 +1,1 @@
+"""The command-line application (click), kept apart from the library."""

@@ -1,0 +1,325 @@
+"""The ``mocap-exaggerate`` command line: parses options, calls the library, reports.
+
+No algorithm lives here.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import click
+import numpy as np
+
+from mocap_exaggerate import __version__
+from mocap_exaggerate.errors import MocapError
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
+from mocap_exaggerate.io.files import atomic_write
+from mocap_exaggerate.limbs import find_limbs
+from mocap_exaggerate.pipeline import (
+    DEFAULT_PRESET,
+    manifest,
+    preset_description,
+    preset_names,
+    resolve_config,
+    run,
+)
+from mocap_exaggerate.stages.tpose import detect_rest_frames
+
+log = logging.getLogger("mocap_exaggerate")
+
+
+class UserError(click.ClickException):
+    """A mistake in the input or the options: one line, exit code 2."""
+
+    exit_code = 2
+
+
+def _fail_cleanly(func: Callable) -> Callable:
+    """Turn library errors into one-line messages; never a traceback for a user mistake."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except MocapError as error:
+            raise UserError(str(error)) from None
+        except OSError as error:
+            where = f"{error.filename}: " if getattr(error, "filename", None) else ""
+            raise click.ClickException(f"{where}{error.strerror or error}") from None
+
+    return wrapper
+
+
+def _parse_weights(ctx, param, values: tuple[str, ...]) -> tuple[tuple[str, float], ...]:
+    out = []
+    for item in values:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise click.BadParameter(f"{item!r} is not NAME=WEIGHT (e.g. LeftArm=2, left_leg=0.5, 'Left*'=0)")
+        try:
+            weight = float(value)
+        except ValueError:
+            raise click.BadParameter(f"{item!r}: weight {value!r} is not a number") from None
+        if not np.isfinite(weight) or not 0 <= weight <= 10:
+            raise click.BadParameter(f"{item!r}: weight must be between 0 and 10")
+        out.append((key.strip(), weight))
+    return tuple(out)
+
+
+# ---------------------------------------------------------------------------- shared options
+
+
+def pipeline_options(func: Callable) -> Callable:
+    """The options that set the pipeline, shared by every command that runs it."""
+    options = [
+        click.option("--preset", default=None, metavar="NAME",
+                     help=f"Starting point: {', '.join(preset_names())} (default {DEFAULT_PRESET})."),
+        click.option("--config", "config_file", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                     help="Pipeline TOML file; overrides the preset, overridden by flags."),
+        click.option("--sigma", default=None, metavar="DURATION",
+                     help="Width of the Gaussian average: 0.2s, 200ms or 18f (frames)."),
+        click.option("--omega", type=float, default=None,
+                     help="Extrapolation factor: 1 = as captured, 5 = the paper's, <1 calms."),
+        click.option("--weight", "weights", multiple=True, callback=_parse_weights, metavar="NAME=W",
+                     help="Per-joint exaggeration weight; NAME is a joint, a pattern (Left*) or a limb "
+                          "(left_arm, right_leg, spine, neck). Repeatable; 0 keeps it as captured."),
+        click.option("--extrapolate/--no-extrapolate", "extrapolate_on", default=None,
+                     help="Switch trajectory extrapolation on or off."),
+        click.option("--threshold", type=float, default=None,
+                     help="Correction: summed stretch allowed per frame, as a fraction of total link length."),
+        click.option("--delta", type=float, default=None, help="Correction: share of excess removed per iteration, (0, 1]."),
+        click.option("--max-stretch", type=float, default=None,
+                     help="Correction: stretch up to this factor of a link's length is free."),
+        click.option("--max-iter", type=int, default=None, help="Correction: iteration bound."),
+        click.option("--correct/--no-correct", "correct_on", default=None, help="Switch link correction on or off."),
+        click.option("--tpose", type=click.Choice(["auto", "keep", "drop"]), default=None,
+                     help="Leading synthetic rest pose: auto (keep out of filters, unchanged), keep, drop."),
+        click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def _overrides(p: dict[str, Any]) -> dict[str, Any]:
+    table: dict[str, dict[str, Any]] = {"input": {}, "extrapolate": {}, "correct": {}}
+    pairs = [
+        ("input", "tpose", p["tpose"]), ("input", "fps", p["fps"]),
+        ("extrapolate", "enabled", p["extrapolate_on"]), ("extrapolate", "sigma", p["sigma"]),
+        ("extrapolate", "omega", p["omega"]),
+        ("correct", "enabled", p["correct_on"]), ("correct", "threshold", p["threshold"]),
+        ("correct", "delta", p["delta"]), ("correct", "max_stretch", p["max_stretch"]),
+        ("correct", "max_iter", p["max_iter"]),
+    ]
+    for block, key, value in pairs:
+        if value is not None:
+            table[block][key] = value
+    if p["weights"]:
+        table["extrapolate"]["weights"] = dict(p["weights"])
+    return {k: v for k, v in table.items() if v}
+
+
+def _config_from_options(p: dict[str, Any]):
+    text = None
+    if p["config_file"] is not None:
+        try:
+            text = p["config_file"].read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise UserError(f"{p['config_file']}: no such config file") from None
+    preset = p["preset"] or DEFAULT_PRESET
+    config = resolve_config(preset, text, _overrides(p), config_source=str(p["config_file"] or "options"))
+    return preset, config
+
+
+# ---------------------------------------------------------------------------- commands
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(__version__, prog_name="mocap-exaggerate")
+@click.option("-v", "--verbose", count=True, help="More detail on stderr (-vv for debugging).")
+@click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
+def cli(verbose: int, quiet: bool) -> None:
+    """Turn motion capture (BVH) into cartoon-style motion.
+
+    \b
+    Example:
+      mocap-exaggerate exaggerate sample_data/cmu_09_01_run_daz.bvh -o out/ --sigma 0.2s --omega 5
+      mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs
+    """
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
+
+
+@cli.command()
+@click.argument("input_path", metavar="IN.bvh", type=click.Path(path_type=Path, allow_dash=True))
+@click.option("-o", "--output", "output", required=True, type=click.Path(path_type=Path, allow_dash=True),
+              help="Output folder (created if needed), or - to write the BVH to stdout.")
+@click.option("--name", default=None, help="Output file stem (default: the input's; 'stdin' for -).")
+@click.option("--overwrite", is_flag=True, help="Replace outputs that exist already.")
+@pipeline_options
+@_fail_cleanly
+def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool, **options) -> None:
+    """Exaggerate one clip: writes OUT/<name>.bvh and OUT/<name>.json (manifest).
+
+    \b
+    Examples:
+      mocap-exaggerate exaggerate walk.bvh -o out/                       # cartoon preset
+      mocap-exaggerate exaggerate walk.bvh -o out/ --preset looney --weight Hips=0
+      mocap-exaggerate exaggerate walk.bvh -o out/ --sigma 18f --omega 3 --no-correct
+      cat walk.bvh | mocap-exaggerate exaggerate - -o - > walk_cartoon.bvh
+    """
+    preset, config = _config_from_options(options)
+    started = time.perf_counter()
+    if str(input_path) == "-":
+        data = sys.stdin.buffer.read()
+        label = "<stdin>"
+        stem = name or "stdin"
+    else:
+        try:
+            data = input_path.read_bytes()
+        except FileNotFoundError:
+            raise UserError(f"{input_path}: no such file") from None
+        except IsADirectoryError:
+            raise UserError(f"{input_path}: is a folder; give a .bvh file") from None
+        label = str(input_path)
+        stem = name or input_path.stem
+    motion, report = read_bvh(data, name=label, fps=config.input.fps)
+    read_seconds = time.perf_counter() - started
+    for warning in report.warnings:
+        log.warning("%s: %s", label, warning)
+
+    result = run(motion, config)
+    for note in result.notes:
+        log.info("%s: %s", label, note)
+
+    started = time.perf_counter()
+    bvh_bytes = format_bvh(result.motion)
+    write_seconds = time.perf_counter() - started
+
+    if str(output) == "-":
+        sys.stdout.buffer.write(bvh_bytes)
+        sys.stdout.buffer.flush()
+        return
+
+    bvh_path = output / f"{stem}.bvh"
+    json_path = output / f"{stem}.json"
+    if output.exists() and not output.is_dir():
+        raise UserError(f"{output}: exists and is not a folder")
+    if str(input_path) != "-" and bvh_path.resolve() == input_path.resolve():
+        raise UserError(f"{bvh_path}: would overwrite the input; choose another -o folder or --name")
+    for path in (bvh_path, json_path):
+        if path.exists() and not overwrite:
+            raise UserError(f"{path} exists; pass --overwrite to replace it")
+    info = manifest(
+        input_name=label,
+        input_bytes=data,
+        config=config,
+        preset=preset,
+        result=result,
+        outputs={"bvh": bvh_path.name},
+        read_seconds=read_seconds,
+        write_seconds=write_seconds,
+        reader_warnings=report.warnings,
+        frames_in=motion.num_frames,
+        fps=motion.fps,
+    )
+    started = time.perf_counter()
+    atomic_write(bvh_path, bvh_bytes, overwrite=True)
+    info["timings"]["write"] += time.perf_counter() - started
+    atomic_write(json_path, (json.dumps(info, indent=2) + "\n").encode("utf-8"), overwrite=True)
+    total = sum(info["timings"].values())
+    if not _quiet():
+        click.echo(
+            f"wrote {bvh_path} and {json_path.name}: {result.motion.num_frames} frames, "
+            f"{result.motion.skeleton.num_joints} joints, max link stretch {result.max_link_stretch:.2f}x, "
+            f"{total:.2f} s",
+            err=True,
+        )
+
+
+def _quiet() -> bool:
+    ctx = click.get_current_context(silent=True)
+    return bool(ctx and ctx.find_root().params.get("quiet"))
+
+
+@cli.command()
+@click.argument("input_path", metavar="IN.bvh", type=click.Path(path_type=Path, allow_dash=True))
+@click.option("--limbs", is_flag=True, help="Also list the limbs found (base to end effector).")
+@click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
+@_fail_cleanly
+def info(input_path: Path, limbs: bool, fps: float | None, as_json: bool) -> None:
+    """Describe a clip: joints, channels, rotation orders, frames, fps, duration, height.
+
+    \b
+    Example:
+      mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs
+    """
+    label = "<stdin>" if str(input_path) == "-" else str(input_path)
+    motion, report = read_bvh(input_path, name=label, fps=fps)
+    skeleton = motion.skeleton
+    orders: dict[str, int] = {}
+    for j in range(skeleton.num_joints):
+        if skeleton.channels[j]:
+            orders[skeleton.rotation_order(j)] = orders.get(skeleton.rotation_order(j), 0) + 1
+    end_sites = int(np.isfinite(skeleton.end_sites[:, 0]).sum())
+    data: dict[str, Any] = {
+        "file": label,
+        "joints": skeleton.num_joints,
+        "end_sites": end_sites,
+        "channels": skeleton.num_channels,
+        "position_channel_joints": [skeleton.names[j] for j in range(skeleton.num_joints) if skeleton.has_position_channels(j)],
+        "rotation_orders": orders,
+        "frames": motion.num_frames,
+        "fps": round(motion.fps, 6),
+        "duration_s": round(motion.duration, 6),
+        "up_axis": "XYZ"[skeleton.up_axis()],
+        "height": round(skeleton.height(), 4),
+        "rest_frames": detect_rest_frames(motion),
+        "warnings": report.warnings,
+    }
+    if limbs:
+        data["limbs"] = {name: [skeleton.names[j] for j in limb.joints] for name, limb in find_limbs(skeleton).items()}
+    if as_json:
+        click.echo(json.dumps(data, indent=2))
+        return
+    click.echo(f"{label}")
+    click.echo(f"  joints      {data['joints']} (+{end_sites} End Sites), root {skeleton.names[0]}")
+    click.echo(f"  channels    {data['channels']}; position channels on {', '.join(data['position_channel_joints']) or 'none'}")
+    click.echo(f"  rotation    {', '.join(f'{o} x{n}' for o, n in orders.items())}")
+    click.echo(f"  frames      {data['frames']} at {motion.fps:g} fps ({motion.duration:.3f} s)")
+    click.echo(f"  height      {data['height']:g} units along {data['up_axis']} (rest pose)")
+    if data["rest_frames"]:
+        click.echo(f"  rest pose   {data['rest_frames']} leading synthetic frame(s) (see --tpose)")
+    for warning in report.warnings:
+        click.echo(f"  warning     {warning}")
+    if limbs:
+        for name, chain in data["limbs"].items():
+            click.echo(f"  {name:<11} {' > '.join(chain)}")
+
+
+@cli.command()
+def presets() -> None:
+    """List the shipped presets and what they do.
+
+    \b
+    Example:
+      mocap-exaggerate presets
+    """
+    for name in preset_names():
+        mark = " (default)" if name == DEFAULT_PRESET else ""
+        click.echo(f"{name}{mark}: {preset_description(name)}")
+
+
+def main() -> None:
+    cli(prog_name="mocap-exaggerate")
+
+
+if __name__ == "__main__":
+    main()

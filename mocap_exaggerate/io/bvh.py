@@ -1,0 +1,572 @@
+"""BVH reading and writing.
+
+The header (a few hundred lines) is parsed token by token with line numbers
+kept for error messages. The MOTION block, which is nearly all of a file, is
+never walked line by line in Python: its bytes are classified with NumPy to
+count the values on each line, and the numbers are converted in one call.
+Writing formats whole blocks of frames with one ``%`` operation.
+
+Position channels replace the joint's OFFSET (the convention of bvhio,
+Blender and most readers); joints without them use the OFFSET.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import os
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+from ..errors import InputError
+from ..motion import Motion
+from ..rotations import quat_from_euler, quat_to_euler
+from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
+from .files import atomic_write
+
+__all__ = ["BVHReport", "read_bvh", "load_bvh", "save_bvh", "format_bvh"]
+
+log = logging.getLogger(__name__)
+
+_CHANNEL_NAMES = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
+
+_WHITESPACE = np.zeros(256, dtype=bool)
+_WHITESPACE[[9, 10, 11, 12, 13, 32]] = True
+
+_MOTION_RE = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE | re.IGNORECASE)
+_FRAMES_RE = re.compile(r"^\s*Frames\s*:\s*(\S*)\s*$", re.IGNORECASE)
+_FRAME_TIME_RE = re.compile(r"^\s*Frame\s+Time\s*:\s*(\S*)\s*$", re.IGNORECASE)
+
+
+@dataclass
+class BVHReport:
+    """What the reader noticed while reading one file.
+
+    ``declared_frames`` is the header's ``Frames:``; ``data_lines`` the number
+    of non-empty motion lines found; ``header_fps`` the rate the header states.
+    """
+
+    source: str
+    declared_frames: int = 0
+    data_lines: int = 0
+    header_fps: float = 0.0
+    warnings: list[str] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------------------- reading
+
+
+def read_bvh(
+    source: str | os.PathLike | bytes | BinaryIO,
+    *,
+    name: str | None = None,
+    fps: float | None = None,
+) -> tuple[Motion, BVHReport]:
+    """Read a BVH clip.
+
+    Parameters
+    ----------
+    source : path, ``"-"`` for standard input, raw bytes, or a binary file
+    name : how to call the source in messages (defaults to the path)
+    fps : frame rate that overrides the header's ``Frame Time`` (some
+        exporters write a wrong one)
+
+    Returns
+    -------
+    motion : Motion
+    report : BVHReport with the counts and warnings
+
+    Raises
+    ------
+    InputError
+        with ``file:line: problem`` for anything malformed.
+    """
+    data, label = _read_bytes(source, name)
+    report = BVHReport(source=label)
+    if b"\x00" in data[:4096]:
+        raise InputError("not a BVH file (binary data)", source=label, line=1)
+
+    motion_match = _MOTION_RE.search(data)
+    if motion_match is None:
+        last_line = data.rstrip().count(b"\n") + 1
+        if not data.strip():
+            raise InputError("file is empty", source=label, line=1)
+        _parse_header(_decode(data, label), label)  # reports the first header fault, if any
+        raise InputError("no MOTION section after the hierarchy", source=label, line=last_line)
+    header_text = _decode(data[: motion_match.start()], label)
+    skeleton = _parse_header(header_text, label)
+    motion_line = data.count(b"\n", 0, motion_match.start()) + 1
+
+    # "Frames:" and "Frame Time:" on the next non-blank lines.
+    pos = _line_end(data, motion_match.end())
+    line_no = motion_line
+    declared_frames = frame_time = None
+    for what in ("Frames", "Frame Time"):
+        while True:
+            if pos >= len(data):
+                raise InputError(f"missing '{what}:' line after MOTION", source=label, line=line_no)
+            end = _line_end(data, pos)
+            line_no += 1
+            line = data[pos:end].decode("latin-1")
+            pos = end
+            if line.strip():
+                break
+        if what == "Frames":
+            m = _FRAMES_RE.match(line)
+            if not m:
+                raise InputError(f"expected 'Frames: <count>', found {line.strip()!r}", source=label, line=line_no)
+            try:
+                declared_frames = int(m.group(1))
+            except ValueError:
+                raise InputError(f"frame count {m.group(1)!r} is not a whole number", source=label, line=line_no) from None
+            if declared_frames < 0:
+                raise InputError(f"frame count {declared_frames} is negative", source=label, line=line_no)
+            frames_line = line_no
+        else:
+            m = _FRAME_TIME_RE.match(line)
+            if not m:
+                raise InputError(f"expected 'Frame Time: <seconds>', found {line.strip()!r}", source=label, line=line_no)
+            try:
+                frame_time = float(m.group(1))
+            except ValueError:
+                raise InputError(f"frame time {m.group(1)!r} is not a number", source=label, line=line_no) from None
+            if not (np.isfinite(frame_time) and frame_time > 0) and fps is None:
+                raise InputError(
+                    f"frame time {m.group(1)} is not a positive number of seconds (pass --fps to set the rate)",
+                    source=label,
+                    line=line_no,
+                )
+            frame_time_line = line_no
+    del frame_time_line
+    report.declared_frames = declared_frames
+    report.header_fps = 1.0 / frame_time if frame_time and frame_time > 0 else 0.0
+    if declared_frames == 0:
+        raise InputError("'Frames: 0': the clip has no frames", source=label, line=frames_line)
+
+    values = _parse_motion(
+        data[pos:], skeleton.num_channels, declared_frames, first_line=line_no + 1, label=label, report=report
+    )
+
+    if fps is not None:
+        if not (np.isfinite(fps) and fps > 0):
+            raise InputError(f"--fps must be positive, got {fps}", source=label)
+        if report.header_fps and abs(report.header_fps - fps) > 1e-6 * fps:
+            report.warnings.append(f"frame rate set to {fps:g} fps (header says {report.header_fps:g})")
+        frame_time = 1.0 / fps
+    motion = _motion_from_channels(skeleton, values, frame_time)
+    return motion, report
+
+
+def load_bvh(path: str | os.PathLike | BinaryIO, *, fps: float | None = None) -> Motion:
+    """Read a BVH clip and log the reader's warnings. See `read_bvh`."""
+    motion, report = read_bvh(path, fps=fps)
+    for warning in report.warnings:
+        log.warning("%s: %s", report.source, warning)
+    return motion
+
+
+def _read_bytes(source, name: str | None) -> tuple[bytes, str]:
+    if isinstance(source, (bytes, bytearray)):
+        return bytes(source), name or "<bytes>"
+    if hasattr(source, "read"):
+        data = source.read()
+        if isinstance(data, str):
+            data = data.encode("utf-8")
+        return data, name or getattr(source, "name", "<stream>")
+    if str(source) == "-":
+        return sys.stdin.buffer.read(), name or "<stdin>"
+    path = Path(source)
+    label = name or str(path)
+    try:
+        return path.read_bytes(), label
+    except IsADirectoryError:
+        raise InputError("is a folder, not a BVH file", source=label) from None
+    except FileNotFoundError:
+        raise InputError("no such file", source=label) from None
+    except PermissionError:
+        raise InputError("permission denied", source=label) from None
+
+
+def _decode(data: bytes, label: str) -> str:
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")
+    return text.lstrip("\ufeff")
+
+
+def _line_end(data: bytes, pos: int) -> int:
+    """Index just past the newline that ends the line containing ``pos``."""
+    end = data.find(b"\n", pos)
+    return len(data) if end < 0 else end + 1
+
+
+class _Tokens:
+    """Header tokens with their line numbers; names keep their inner spaces."""
+
+    def __init__(self, text: str, label: str) -> None:
+        self.label = label
+        self.items: list[tuple[str, int, int]] = []  # token, line, position in line
+        self.lines: list[list[str]] = []
+        for number, line in enumerate(text.split("\n"), start=1):
+            words = line.split()
+            self.lines.append(words)
+            self.items.extend((w, number, k) for k, w in enumerate(words))
+        self.i = 0
+
+    def error(self, message: str, line: int | None = None) -> InputError:
+        if line is None:
+            line = self.items[min(self.i, len(self.items) - 1)][1] if self.items else 1
+        return InputError(message, source=self.label, line=line)
+
+    def peek(self) -> str | None:
+        return self.items[self.i][0] if self.i < len(self.items) else None
+
+    def next(self, what: str) -> tuple[str, int]:
+        if self.i >= len(self.items):
+            last = self.items[-1][1] if self.items else 1
+            raise self.error(f"file ends where {what} was expected", last)
+        token, line, _ = self.items[self.i]
+        self.i += 1
+        return token, line
+
+    def rest_of_line(self) -> tuple[list[str], int]:
+        """The remaining tokens on the current token's line."""
+        if self.i >= len(self.items):
+            return [], self.items[-1][1] if self.items else 1
+        _, line, _ = self.items[self.i]
+        out = []
+        while self.i < len(self.items) and self.items[self.i][1] == line:
+            out.append(self.items[self.i][0])
+            self.i += 1
+        return out, line
+
+    def numbers(self, count: int, what: str) -> np.ndarray:
+        values = []
+        for _ in range(count):
+            token, line = self.next(what)
+            try:
+                value = float(token)
+            except ValueError:
+                raise self.error(f"{what}: {token!r} is not a number", line) from None
+            if not np.isfinite(value):
+                raise self.error(f"{what}: {token!r} is not a finite number", line)
+            values.append(value)
+        return np.array(values)
+
+
+def _parse_header(text: str, label: str) -> Skeleton:
+    tokens = _Tokens(text, label)
+    first = tokens.peek()
+    if first is None:
+        raise InputError("file is empty", source=label, line=1)
+    token, line = tokens.next("HIERARCHY")
+    if token.upper() != "HIERARCHY":
+        raise tokens.error(f"not a BVH file: expected 'HIERARCHY', found {token[:40]!r}", line)
+    token, line = tokens.next("ROOT")
+    if token.upper() != "ROOT":
+        raise tokens.error(f"expected 'ROOT', found {token[:40]!r}", line)
+
+    names: list[str] = []
+    parents: list[int] = []
+    offsets: list[np.ndarray | None] = []
+    channels: list[tuple[str, ...]] = []
+    end_sites: list[np.ndarray] = []
+    seen: dict[str, int] = {}
+
+    def open_joint(parent: int, keyword_line: int) -> int:
+        words, line = tokens.rest_of_line()
+        brace_on_line = bool(words) and words[-1] == "{"
+        if brace_on_line:
+            words = words[:-1]
+        if not words:
+            raise tokens.error("joint has no name", keyword_line)
+        name = " ".join(words)
+        if name in seen:
+            raise tokens.error(f"joint name {name!r} is used twice (first on line {seen[name]})", line)
+        seen[name] = line
+        if not brace_on_line:
+            token, brace_line = tokens.next("'{'")
+            if token != "{":
+                raise tokens.error(f"expected '{{' after joint {name!r}, found {token[:40]!r}", brace_line)
+        names.append(name)
+        parents.append(parent)
+        offsets.append(None)
+        channels.append(())
+        end_sites.append(np.full(3, np.nan))
+        return len(names) - 1
+
+    stack = [open_joint(-1, line)]
+    root_line = line
+    while stack:
+        joint = stack[-1]
+        token, line = tokens.next(f"'}}' closing joint {names[joint]!r}")
+        keyword = token.upper()
+        if keyword == "OFFSET":
+            if offsets[joint] is not None:
+                raise tokens.error(f"joint {names[joint]!r} has a second OFFSET", line)
+            offsets[joint] = tokens.numbers(3, "OFFSET")
+        elif keyword == "CHANNELS":
+            if channels[joint]:
+                raise tokens.error(f"joint {names[joint]!r} has a second CHANNELS line", line)
+            count_token, _ = tokens.next("channel count")
+            try:
+                count = int(count_token)
+            except ValueError:
+                raise tokens.error(f"CHANNELS count {count_token!r} is not a whole number", line) from None
+            if not 0 <= count <= 6:
+                raise tokens.error(f"CHANNELS count {count} is not between 0 and 6", line)
+            listed = []
+            for _ in range(count):
+                name_token, name_line = tokens.next("channel name")
+                if name_line != line:
+                    raise tokens.error(f"CHANNELS says {count} but lists {len(listed)}", line)
+                if name_token.lower() not in _CHANNEL_NAMES:
+                    raise tokens.error(f"unknown channel {name_token[:40]!r}", name_line)
+                listed.append(_CHANNEL_NAMES[name_token.lower()])
+            if len(set(listed)) != len(listed):
+                raise tokens.error(f"channel listed twice on joint {names[joint]!r}", line)
+            extra, _ = (tokens.rest_of_line() if tokens.i < len(tokens.items) and tokens.items[tokens.i][1] == line else ([], line))
+            if extra:
+                raise tokens.error(f"CHANNELS says {count} but lists {count + len(extra)}", line)
+            channels[joint] = tuple(listed)
+        elif keyword == "JOINT":
+            if offsets[joint] is None:
+                raise tokens.error(f"joint {names[joint]!r} has no OFFSET before its children", line)
+            stack.append(open_joint(joint, line))
+        elif keyword == "END":
+            site, site_line = tokens.next("'Site'")
+            if site.upper() != "SITE":
+                raise tokens.error(f"expected 'End Site', found 'End {site[:40]}'", site_line)
+            brace, brace_line = tokens.next("'{'")
+            if brace != "{":
+                raise tokens.error(f"expected '{{' after End Site, found {brace[:40]!r}", brace_line)
+            offset_token, offset_line = tokens.next("OFFSET")
+            if offset_token.upper() != "OFFSET":
+                raise tokens.error(f"End Site needs an OFFSET, found {offset_token[:40]!r}", offset_line)
+            end_sites[joint] = tokens.numbers(3, "End Site OFFSET")
+            close, close_line = tokens.next("'}'")
+            if close != "}":
+                raise tokens.error(f"expected '}}' closing End Site, found {close[:40]!r}", close_line)
+        elif token == "}":
+            if offsets[joint] is None:
+                raise tokens.error(f"joint {names[joint]!r} (line {seen[names[joint]]}) has no OFFSET", line)
+            stack.pop()
+        elif keyword == "ROOT":
+            raise tokens.error("a second ROOT inside the hierarchy (unclosed '{' above?)", line)
+        else:
+            raise tokens.error(f"unexpected {token[:40]!r} in joint {names[joint]!r}", line)
+
+    leftover = tokens.peek()
+    if leftover is not None:
+        _, line = tokens.next("")
+        if leftover.upper() == "ROOT":
+            raise tokens.error("several ROOT hierarchies in one file are not supported", line)
+        raise tokens.error(f"unexpected {leftover[:40]!r} after the hierarchy (unbalanced '}}'?)", line)
+    del root_line
+    return Skeleton(tuple(names), np.array(parents), np.array(offsets), tuple(channels), np.array(end_sites))
+
+
+def _parse_motion(
+    block: bytes, num_channels: int, declared: int, *, first_line: int, label: str, report: BVHReport
+) -> np.ndarray:
+    """Frame values ``(F, C)`` from the bytes after ``Frame Time:``."""
+    buf = np.frombuffer(block, dtype=np.uint8)
+    space = _WHITESPACE[buf]
+    newline = buf == 10
+    line_of_byte = np.cumsum(newline) - newline
+    starts = ~space & np.concatenate([[True], space[:-1]])
+    num_lines = int(line_of_byte[-1]) + 1 if len(buf) else 0
+    counts = np.bincount(line_of_byte[starts], minlength=num_lines)
+    rows = np.flatnonzero(counts)  # indices of non-empty lines within the block
+    report.data_lines = len(rows)
+
+    if num_channels == 0:
+        if len(rows):
+            raise InputError("the hierarchy has no channels but motion lines follow", source=label, line=first_line + int(rows[0]))
+        return np.zeros((declared, 0))
+    if len(rows) < declared:
+        complete = int(np.sum(counts[rows] == num_channels))
+        short = f"; line {first_line + int(rows[-1])} has {counts[rows[-1]]} of {num_channels} values" if len(rows) and counts[rows[-1]] != num_channels else ""
+        raise InputError(
+            f"'Frames: {declared}' but only {complete} complete motion lines follow (file truncated?){short}",
+            source=label,
+            line=first_line + (int(rows[-1]) if len(rows) else 0),
+        )
+    used = rows[:declared]
+    bad = np.flatnonzero(counts[used] != num_channels)
+    if len(bad):
+        row = int(used[bad[0]])
+        if row == rows[-1] and counts[row] < num_channels:
+            raise InputError(
+                f"'Frames: {declared}' but only {declared - 1} complete motion lines follow "
+                f"(file truncated? the last line has {counts[row]} of {num_channels} values)",
+                source=label,
+                line=first_line + row,
+            )
+        raise InputError(
+            f"motion line has {counts[row]} values, expected {num_channels} (one per channel)",
+            source=label,
+            line=first_line + row,
+        )
+    if len(rows) > declared:
+        report.warnings.append(
+            f"'Frames: {declared}' but {len(rows)} motion lines follow; reading the first {declared}"
+        )
+
+    end = int(np.flatnonzero(line_of_byte == used[-1])[-1]) + 1
+    chunk = block[:end]
+    try:
+        values = np.array(chunk.split(), dtype=np.float64)
+    except ValueError:
+        values = None
+    if values is None or not np.all(np.isfinite(values)):
+        _raise_bad_value(chunk, first_line, label)
+    return values.reshape(declared, num_channels)
+
+
+def _raise_bad_value(chunk: bytes, first_line: int, label: str) -> None:
+    """Find and report the first value that is not a finite number (error path only)."""
+    for offset, line in enumerate(chunk.split(b"\n")):
+        for token in line.split():
+            try:
+                value = float(token)
+            except ValueError:
+                value = None
+            if value is None or not np.isfinite(value):
+                text = token.decode("latin-1")[:40]
+                raise InputError(f"motion value {text!r} is not a finite number", source=label, line=first_line + offset)
+    raise InputError("motion data could not be read", source=label, line=first_line)
+
+
+def _motion_from_channels(skeleton: Skeleton, values: np.ndarray, frame_time: float) -> Motion:
+    frames = values.shape[0]
+    joints = skeleton.num_joints
+    local_pos = np.broadcast_to(skeleton.offsets, (frames, joints, 3)).copy()
+    euler = np.zeros((frames, joints, 3))
+    column = 0
+    by_order: dict[str, list[int]] = {}
+    for j, names in enumerate(skeleton.channels):
+        order = skeleton.rotation_order(j)
+        by_order.setdefault(order, []).append(j)
+        for name in names:
+            axis = "XYZ".index(name[0])
+            if name in POSITION_CHANNELS:
+                local_pos[:, j, axis] = values[:, column]
+            else:
+                euler[:, j, order.index(name[0])] = values[:, column]
+            column += 1
+    local_rot = np.empty((frames, joints, 4))
+    for order, members in by_order.items():
+        local_rot[:, members] = quat_from_euler(euler[:, members], order)
+    return Motion(skeleton, frame_time, local_rot, local_pos, euler)
+
+
+# ---------------------------------------------------------------------------- writing
+
+
+def motion_channels(motion: Motion) -> np.ndarray:
+    """The motion as BVH channel values ``(F, C)`` in the skeleton's channel layout."""
+    skeleton = motion.skeleton
+    frames = motion.num_frames
+    euler = np.zeros((frames, skeleton.num_joints, 3))
+    by_order: dict[str, list[int]] = {}
+    for j in range(skeleton.num_joints):
+        if any(c in ROTATION_CHANNELS for c in skeleton.channels[j]):
+            by_order.setdefault(skeleton.rotation_order(j), []).append(j)
+    for order, members in by_order.items():
+        hint = None if motion.euler_hint is None else motion.euler_hint[:, members]
+        euler[:, members] = quat_to_euler(motion.local_rotations[:, members], order, reference=hint)
+    columns = []
+    for j, names in enumerate(skeleton.channels):
+        order = skeleton.rotation_order(j)
+        for name in names:
+            axis = "XYZ".index(name[0])
+            if name in POSITION_CHANNELS:
+                columns.append(motion.local_positions[:, j, axis])
+            else:
+                columns.append(euler[:, j, order.index(name[0])])
+    if not columns:
+        return np.zeros((frames, 0))
+    return np.stack(columns, axis=1)
+
+
+def _fmt(value: float) -> str:
+    text = f"{value:.6f}"
+    return "0.000000" if text == "-0.000000" else text
+
+
+def _format_header(motion: Motion) -> str:
+    skeleton = motion.skeleton
+    out = io.StringIO()
+    children = [[] for _ in range(skeleton.num_joints)]
+    for j in range(1, skeleton.num_joints):
+        children[skeleton.parents[j]].append(j)
+
+    def write(j: int, depth: int) -> None:
+        pad = "\t" * depth
+        keyword = "ROOT" if j == 0 else "JOINT"
+        out.write(f"{pad}{keyword} {skeleton.names[j]}\n{pad}{{\n")
+        out.write(f"{pad}\tOFFSET {' '.join(_fmt(v) for v in skeleton.offsets[j])}\n")
+        chans = skeleton.channels[j]
+        out.write(f"{pad}\tCHANNELS {len(chans)}{''.join(' ' + c for c in chans)}\n")
+        for child in children[j]:
+            write(child, depth + 1)
+        if np.isfinite(skeleton.end_sites[j, 0]):
+            out.write(f"{pad}\tEnd Site\n{pad}\t{{\n")
+            out.write(f"{pad}\t\tOFFSET {' '.join(_fmt(v) for v in skeleton.end_sites[j])}\n")
+            out.write(f"{pad}\t}}\n")
+        out.write(f"{pad}}}\n")
+
+    out.write("HIERARCHY\n")
+    write(0, 0)
+    frame_time = np.format_float_positional(motion.frame_time, trim="-")
+    out.write(f"MOTION\nFrames: {motion.num_frames}\nFrame Time: {frame_time}\n")
+    return out.getvalue()
+
+
+_BLOCK_FRAMES = 2048
+
+
+def format_bvh(motion: Motion) -> bytes:
+    """The whole file as bytes: fixed-point numbers, LF line ends, tabs."""
+    values = motion_channels(motion)
+    if not np.all(np.isfinite(values)):
+        raise ValueError("motion has NaN or infinite values; refusing to write them")
+    # Fixed point with six decimals; "-0.000000" is written as "0.000000".
+    values = np.round(values, 6) + 0.0
+    parts = [_format_header(motion).encode("ascii", errors="strict") if _is_ascii(motion) else _format_header(motion).encode("utf-8")]
+    channels = values.shape[1]
+    if channels:
+        row = " ".join(["%.6f"] * channels) + "\n"
+        for start in range(0, len(values), _BLOCK_FRAMES):
+            block = values[start : start + _BLOCK_FRAMES]
+            parts.append(((row * len(block)) % tuple(block.ravel().tolist())).encode("ascii"))
+    else:
+        parts.append(b"\n" * len(values))
+    return b"".join(parts)
+
+
+def _is_ascii(motion: Motion) -> bool:
+    return all(name.isascii() for name in motion.skeleton.names)
+
+
+def save_bvh(motion: Motion, path: str | os.PathLike | BinaryIO, *, overwrite: bool = True) -> None:
+    """Write ``motion`` as BVH, atomically (temporary file, then rename).
+
+    ``path`` may be ``"-"`` (standard output) or a binary file object.
+    """
+    data = format_bvh(motion)
+    if hasattr(path, "write"):
+        path.write(data)
+        return
+    if str(path) == "-":
+        sys.stdout.buffer.write(data)
+        sys.stdout.buffer.flush()
+        return
+    atomic_write(Path(path), data, overwrite=overwrite)

@@ -1,0 +1,191 @@
+"""Finding a humanoid's limbs from joint names and topology.
+
+A limb runs from its base joint to its end effector, as the Stretch-Engine
+thesis's distance ruler does: arm = upper-arm joint (the shoulder ball, not
+the clavicle) to wrist/hand; leg = thigh to ankle/foot; spine = first spine
+joint above the pelvis to the neck base; neck = neck base to head.
+
+The middle joints (elbow, knee) have the least ambiguous names across
+exporters (CMU ``LeftForeArm``/``LeftElbow``/``lradius``, Daz ``lForeArm``,
+Reallusion ``CC_Base_L_Forearm``, MakeHuman ``LoArm_L``, Rigify
+``forearm.L``); the limb is then that joint's parent and its main child.
+Left and right come from the names, or from the side of the body.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from .skeleton import Skeleton
+
+__all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints"]
+
+LIMB_NAMES = ("left_arm", "right_arm", "left_leg", "right_leg", "spine", "neck")
+
+_PREFIX = re.compile(r"^(cc_base_|mixamorig\d*[:_]|def[-_]|bip\d*[ _]|b_|j_)", re.IGNORECASE)
+_HELPER = re.compile(r"twist|share|roll|bend|helper|^__|corrective|adjust|nub|end$", re.IGNORECASE)
+_ELBOW = re.compile(r"elbow|forearm|radius|loarm|lowerarm|lower_arm|ulna", re.IGNORECASE)
+_KNEE = re.compile(r"knee|shin|tibia|calf|loleg|lowerleg|lower_leg|(?<!up)(?<!upper)(?<!upper_)leg$", re.IGNORECASE)
+_NECK = re.compile(r"neck", re.IGNORECASE)
+_HEAD = re.compile(r"^head$|head$|^head", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class Limb:
+    """A named chain of joints from ``joints[0]`` (base) to ``joints[-1]`` (end effector)."""
+
+    name: str
+    joints: tuple[int, ...]
+
+    @property
+    def base(self) -> int:
+        return self.joints[0]
+
+    @property
+    def end(self) -> int:
+        return self.joints[-1]
+
+
+def _stem(name: str) -> str:
+    return _PREFIX.sub("", name)
+
+
+def _side_from_name(name: str) -> str | None:
+    stem = _stem(name)
+    low = stem.lower()
+    if "left" in low:
+        return "left"
+    if "right" in low:
+        return "right"
+    if re.search(r"(^|[_.\s-])[lL]([_.\s-]|$)", stem):
+        return "left"
+    if re.search(r"(^|[_.\s-])[rR]([_.\s-]|$)", stem):
+        return "right"
+    if re.match(r"^l[A-Z]", stem) or re.match(r"^L[A-Z]", stem):
+        return "left"
+    if re.match(r"^r[A-Z]", stem) or re.match(r"^R[A-Z]", stem):
+        return "right"
+    return None
+
+
+def _main_child(skeleton: Skeleton, joint: int, sizes: np.ndarray) -> int | None:
+    """The child that carries the limb on: not a helper, largest subtree, then longest link."""
+    children = [c for c in skeleton.children(joint) if not _HELPER.search(skeleton.names[c])]
+    if not children:
+        children = list(skeleton.children(joint))
+    if not children:
+        return None
+    lengths = skeleton.link_lengths()
+    return max(children, key=lambda c: (sizes[c], lengths[c]))
+
+
+def _path(skeleton: Skeleton, top: int, bottom: int) -> list[int]:
+    """Joints from ``top`` down to ``bottom`` (``top`` must be an ancestor)."""
+    chain = [bottom]
+    while chain[-1] != top:
+        parent = int(skeleton.parents[chain[-1]])
+        if parent < 0:
+            raise ValueError(f"{skeleton.names[top]} is not above {skeleton.names[bottom]}")
+        chain.append(parent)
+    return chain[::-1]
+
+
+def _common_ancestor(skeleton: Skeleton, a: int, b: int) -> int:
+    above_a = set(_path(skeleton, 0, a))
+    for j in _path(skeleton, 0, b)[::-1]:
+        if j in above_a:
+            return j
+    return 0
+
+
+def _pair(skeleton: Skeleton, pattern: re.Pattern, lateral: int) -> tuple[int, int] | None:
+    """(left, right) joints whose names match ``pattern``, sides from names or position."""
+    found = [
+        j
+        for j, name in enumerate(skeleton.names)
+        if j > 0 and pattern.search(_stem(name)) and not _HELPER.search(name)
+    ]
+    # Keep the highest matching joint of each branch (e.g. "LeftLeg" not a toe below it).
+    found = [j for j in found if not any(a in found for a in _path(skeleton, 0, j)[:-1])]
+    if len(found) != 2:
+        return None
+    sides = [_side_from_name(skeleton.names[j]) for j in found]
+    if sorted(s or "" for s in sides) != ["left", "right"]:
+        rest = skeleton.rest_positions()
+        # BVH humanoids face +Z with Y up (or -Y with Z up): the left side is +X.
+        order = np.argsort([-rest[j, lateral] for j in found])
+        sides = ["left" if k == order[0] else "right" for k in range(2)]
+    left = found[sides.index("left")]
+    right = found[sides.index("right")]
+    return left, right
+
+
+def find_limbs(skeleton: Skeleton, explicit: dict[str, list[str]] | None = None) -> dict[str, Limb]:
+    """Limbs of a humanoid skeleton, by limb name (those of `LIMB_NAMES` that were found).
+
+    ``explicit`` maps limb names to joint-name chains (base to end) for
+    skeletons the heuristics do not understand; those win over detection.
+    """
+    limbs: dict[str, Limb] = {}
+    sizes = np.array([len(skeleton.descendants(j)) for j in range(skeleton.num_joints)])
+    lateral = 0
+    for kind, pattern in (("arm", _ELBOW), ("leg", _KNEE)):
+        pair = _pair(skeleton, pattern, lateral)
+        if pair is None:
+            continue
+        for side, middle in zip(("left", "right"), pair):
+            base = int(skeleton.parents[middle])
+            end = _main_child(skeleton, middle, sizes)
+            if base <= 0 or end is None:
+                continue
+            limbs[f"{side}_{kind}"] = Limb(f"{side}_{kind}", (base, middle, end))
+
+    if "left_arm" in limbs and "right_arm" in limbs:
+        chest = _common_ancestor(skeleton, limbs["left_arm"].base, limbs["right_arm"].base)
+        pelvis = (
+            _common_ancestor(skeleton, limbs["left_leg"].base, limbs["right_leg"].base)
+            if "left_leg" in limbs and "right_leg" in limbs
+            else 0
+        )
+        torso_root = _common_ancestor(skeleton, pelvis, chest)
+        head = _find_head(skeleton, chest, sizes)
+        if head is not None:
+            up_path = _path(skeleton, torso_root, head)
+            neck_base = next((j for j in up_path if j != torso_root and _NECK.search(skeleton.names[j]) and up_path.index(j) > up_path.index(chest)), None)
+            if neck_base is None:
+                after_chest = up_path[up_path.index(chest) + 1 :]
+                neck_base = after_chest[0] if len(after_chest) > 1 else None
+            if neck_base is not None and len(up_path) > 2:
+                spine = up_path[1 : up_path.index(neck_base) + 1]
+                if len(spine) >= 2:
+                    limbs["spine"] = Limb("spine", tuple(spine))
+                neck = up_path[up_path.index(neck_base) :]
+                if len(neck) >= 2:
+                    limbs["neck"] = Limb("neck", tuple(neck))
+
+    for name, chain in (explicit or {}).items():
+        joints = tuple(skeleton.index(n) for n in chain)
+        for upper, lower in zip(joints, joints[1:]):
+            if upper not in _path(skeleton, 0, lower):
+                raise ValueError(f"limb {name}: {skeleton.names[upper]} is not above {skeleton.names[lower]}")
+        limbs[name] = Limb(name, joints)
+    return {name: limbs[name] for name in sorted(limbs, key=lambda n: (LIMB_NAMES + (n,)).index(n))}
+
+
+def _find_head(skeleton: Skeleton, chest: int, sizes: np.ndarray) -> int | None:
+    below = set(skeleton.descendants(chest).tolist())
+    heads = [j for j in below if _HEAD.search(_stem(skeleton.names[j])) and not _HELPER.search(skeleton.names[j])]
+    if heads:
+        return min(heads, key=lambda j: skeleton.depth()[j])
+    return None
+
+
+def limb_joints(skeleton: Skeleton, limb: Limb, *, with_descendants: bool = True) -> np.ndarray:
+    """Joints a limb moves: its chain, and with ``with_descendants`` all below its end (hand, fingers)."""
+    joints = set(limb.joints)
+    if with_descendants:
+        joints.update(skeleton.descendants(limb.end).tolist())
+    return np.array(sorted(joints), dtype=np.int64)

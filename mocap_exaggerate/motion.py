@@ -1,0 +1,107 @@
+"""Motion: a skeleton plus per-frame local transforms, and forward kinematics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .rotations import quat_mul, quat_rotate
+from .skeleton import Skeleton
+
+__all__ = ["Motion"]
+
+
+@dataclass(frozen=True, eq=False)
+class Motion:
+    """A clip: skeleton, frame time and local transforms of every joint.
+
+    Attributes
+    ----------
+    skeleton : Skeleton with J joints
+    frame_time : float, seconds per frame
+    local_rotations : (F, J, 4) float64 unit quaternions (x, y, z, w)
+    local_positions : (F, J, 3) float64, each joint's translation from its
+        parent: the rest offset where a joint has no position channels, the
+        channel values where it has them. For the root this is the root
+        translation.
+    euler_hint : (F, J, 3) float64 or None, Euler angles in degrees (each
+        joint's own order) that the BVH writer stays nearest to when it picks
+        among equivalent angle triples; the reader fills it with the angles
+        it read, so an unchanged clip writes back the same channels.
+    """
+
+    skeleton: Skeleton
+    frame_time: float
+    local_rotations: np.ndarray
+    local_positions: np.ndarray
+    euler_hint: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        j = self.skeleton.num_joints
+        rot = np.asarray(self.local_rotations, dtype=np.float64)
+        pos = np.asarray(self.local_positions, dtype=np.float64)
+        if rot.ndim != 3 or rot.shape[1:] != (j, 4):
+            raise ValueError(f"local_rotations must be (F, {j}, 4), got {rot.shape}")
+        if pos.shape != rot.shape[:2] + (3,):
+            raise ValueError(f"local_positions must be {rot.shape[:2] + (3,)}, got {pos.shape}")
+        if self.euler_hint is not None and np.shape(self.euler_hint) != pos.shape:
+            raise ValueError(f"euler_hint must be {pos.shape}, got {np.shape(self.euler_hint)}")
+        if not (np.isfinite(self.frame_time) and self.frame_time > 0):
+            raise ValueError(f"frame_time must be a positive number of seconds, got {self.frame_time}")
+        object.__setattr__(self, "local_rotations", rot)
+        object.__setattr__(self, "local_positions", pos)
+        object.__setattr__(self, "frame_time", float(self.frame_time))
+
+    @property
+    def num_frames(self) -> int:
+        return self.local_rotations.shape[0]
+
+    @property
+    def fps(self) -> float:
+        return 1.0 / self.frame_time
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first frame to the last."""
+        return (self.num_frames - 1) * self.frame_time
+
+    @property
+    def root_translation(self) -> np.ndarray:
+        """(F, 3) float64 translation of the root."""
+        return self.local_positions[:, 0]
+
+    def replace(self, **changes) -> Motion:
+        """A copy with some fields changed (``dataclasses.replace``)."""
+        return replace(self, **changes)
+
+    def slice(self, frames: slice) -> Motion:
+        """The frames selected by a slice, as a new Motion."""
+        hint = None if self.euler_hint is None else self.euler_hint[frames]
+        return Motion(
+            self.skeleton, self.frame_time, self.local_rotations[frames], self.local_positions[frames], hint
+        )
+
+    def forward_kinematics(self) -> tuple[np.ndarray, np.ndarray]:
+        """World rotations ``(F, J, 4)`` and world positions ``(F, J, 3)``.
+
+        Loops over joints; every frame is handled at once.
+        """
+        parents = self.skeleton.parents
+        world_rot = np.empty_like(self.local_rotations)
+        world_pos = np.empty_like(self.local_positions)
+        world_rot[:, 0] = self.local_rotations[:, 0]
+        world_pos[:, 0] = self.local_positions[:, 0]
+        for j in range(1, self.skeleton.num_joints):
+            p = parents[j]
+            world_rot[:, j] = quat_mul(world_rot[:, p], self.local_rotations[:, j])
+            world_pos[:, j] = world_pos[:, p] + quat_rotate(world_rot[:, p], self.local_positions[:, j])
+        return world_rot, world_pos
+
+    def world_positions(self) -> np.ndarray:
+        """(F, J, 3) float64 world position of every joint."""
+        return self.forward_kinematics()[1]
+
+    def world_rotations(self) -> np.ndarray:
+        """(F, J, 4) float64 world orientation of every joint."""
+        return self.forward_kinematics()[0]

@@ -1,0 +1,393 @@
+"""The pipeline: stage configs composed into one declaration, presets, and `run`.
+
+A pipeline is the ordered list of blocks that are switched on. Its whole
+declaration is a `PipelineConfig`, which round-trips through TOML; the same
+declaration and input give the same output, byte for byte.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import logging
+import time
+import tomllib
+from dataclasses import asdict, dataclass, field, fields
+from importlib import resources
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from . import __version__
+from .errors import ConfigError
+from .limbs import LIMB_NAMES, find_limbs, limb_joints
+from .motion import Motion
+from .skeleton import Skeleton
+from .stages.correct import CorrectConfig, CorrectReport, correct
+from .stages.extrapolate import ExtrapolateConfig, extrapolate
+from .stages.orient import positions_to_motion
+from .stages.tpose import detect_rest_frames
+
+__all__ = [
+    "InputConfig",
+    "PipelineConfig",
+    "PipelineResult",
+    "DEFAULT_PRESET",
+    "preset_names",
+    "load_preset",
+    "preset_description",
+    "resolve_config",
+    "resolve_weights",
+    "run",
+    "exaggerate",
+    "STAGES",
+]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_PRESET = "cartoon"
+#: Blocks in the order they run.
+STAGES = ("extrapolate", "correct")
+_TPOSE_MODES = ("auto", "keep", "drop")
+
+
+@dataclass(frozen=True, kw_only=True)
+class InputConfig:
+    """How the clip is read.
+
+    tpose : ``auto`` detects a synthetic leading rest pose, keeps it out of
+        every filter and writes it back unchanged; ``keep`` treats it as
+        motion; ``drop`` removes it from the output.
+    fps : frame rate overriding the header's ``Frame Time`` (None keeps it).
+    """
+
+    tpose: str = "auto"
+    fps: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.tpose not in _TPOSE_MODES:
+            raise ConfigError(f"input.tpose must be one of {', '.join(_TPOSE_MODES)}, got {self.tpose!r}")
+        if self.fps is not None and (
+            not isinstance(self.fps, (int, float)) or isinstance(self.fps, bool) or not 0 < self.fps <= 10000
+        ):
+            raise ConfigError(f"input.fps must be a positive frame rate, got {self.fps!r}")
+
+
+_BLOCKS = {"input": InputConfig, "extrapolate": ExtrapolateConfig, "correct": CorrectConfig}
+
+
+@dataclass(frozen=True, kw_only=True)
+class PipelineConfig:
+    """Every block's settings: the whole declaration of a run."""
+
+    input: InputConfig = field(default_factory=InputConfig)
+    extrapolate: ExtrapolateConfig = field(default_factory=ExtrapolateConfig)
+    correct: CorrectConfig = field(default_factory=CorrectConfig)
+    description: str = ""
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], *, source: str = "config") -> PipelineConfig:
+        """Build and validate from nested tables; unknown keys are errors naming the key."""
+        if not isinstance(data, dict):
+            raise ConfigError(f"{source}: expected a table of blocks")
+        blocks: dict[str, Any] = {}
+        for key, value in data.items():
+            if key == "description":
+                if not isinstance(value, str):
+                    raise ConfigError(f"{source}: description must be text")
+                blocks["description"] = value
+                continue
+            if key not in _BLOCKS:
+                raise ConfigError(f"{source}: unknown block [{key}] (known: {', '.join(_BLOCKS)})")
+            if not isinstance(value, dict):
+                raise ConfigError(f"{source}: [{key}] must be a table")
+            block_type = _BLOCKS[key]
+            known = {f.name for f in fields(block_type)}
+            values = {}
+            for name, item in value.items():
+                if name not in known:
+                    raise ConfigError(f"{source}: unknown key {key}.{name} (known: {', '.join(sorted(known))})")
+                values[name] = item
+            if key == "extrapolate" and "weights" in values:
+                values["weights"] = _weights_from_table(values["weights"], source)
+            if key == "correct" and isinstance(values.get("max_iter"), float) and values["max_iter"].is_integer():
+                values["max_iter"] = int(values["max_iter"])
+            try:
+                blocks[key] = block_type(**values)
+            except TypeError as error:
+                raise ConfigError(f"{source}: [{key}]: {error}") from None
+        try:
+            return cls(**blocks)
+        except ConfigError as error:
+            raise ConfigError(f"{source}: {error}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Nested plain tables (TOML-ready: None values are left out)."""
+        out: dict[str, Any] = {}
+        if self.description:
+            out["description"] = self.description
+        for name in _BLOCKS:
+            table = asdict(getattr(self, name))
+            if name == "extrapolate":
+                table["weights"] = {pattern: float(w) for pattern, w in self.extrapolate.weights}
+            out[name] = {k: v for k, v in table.items() if v is not None}
+        return out
+
+    @classmethod
+    def from_toml(cls, text: str, *, source: str = "config") -> PipelineConfig:
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as error:
+            raise ConfigError(f"{source}: not valid TOML: {error}") from None
+        return cls.from_dict(data, source=source)
+
+    def to_toml(self) -> str:
+        return tomli_w.dumps(self.to_dict())
+
+
+def _weights_from_table(table: Any, source: str) -> tuple[tuple[str, float], ...]:
+    if isinstance(table, dict):
+        items = list(table.items())
+    elif isinstance(table, (list, tuple)):
+        items = [tuple(item) for item in table]
+    else:
+        raise ConfigError(f"{source}: extrapolate.weights must be a table of name = weight")
+    out = []
+    for pattern, weight in items:
+        if isinstance(weight, bool) or not isinstance(weight, (int, float)):
+            raise ConfigError(f"{source}: extrapolate.weights[{pattern!r}] must be a number, got {weight!r}")
+        out.append((str(pattern), float(weight)))
+    return tuple(out)
+
+
+# ---------------------------------------------------------------------------- presets
+
+
+def preset_names() -> list[str]:
+    """Names of the shipped presets."""
+    folder = resources.files("mocap_exaggerate") / "presets"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def _preset_table(name: str) -> dict[str, Any]:
+    if name not in preset_names():
+        raise ConfigError(f"unknown preset {name!r} (known: {', '.join(preset_names())})")
+    text = (resources.files("mocap_exaggerate") / "presets" / f"{name}.toml").read_text(encoding="utf-8")
+    return tomllib.loads(text)
+
+
+def load_preset(name: str) -> PipelineConfig:
+    """A shipped preset as a PipelineConfig."""
+    return PipelineConfig.from_dict(_preset_table(name), source=f"preset {name}")
+
+
+def preset_description(name: str) -> str:
+    return str(_preset_table(name).get("description", ""))
+
+
+def _merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+    out = copy.deepcopy(base)
+    for key, value in top.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def resolve_config(
+    preset: str | None = DEFAULT_PRESET,
+    config_text: str | None = None,
+    overrides: dict[str, Any] | None = None,
+    *,
+    config_source: str = "config",
+) -> PipelineConfig:
+    """Shipped preset < config file < explicit overrides (nested tables), validated."""
+    table: dict[str, Any] = _preset_table(preset) if preset else {}
+    if config_text is not None:
+        try:
+            file_table = tomllib.loads(config_text)
+        except tomllib.TOMLDecodeError as error:
+            raise ConfigError(f"{config_source}: not valid TOML: {error}") from None
+        PipelineConfig.from_dict(file_table, source=config_source)  # name the file in its own errors
+        table = _merge(table, file_table)
+    if overrides:
+        table = _merge(table, overrides)
+    return PipelineConfig.from_dict(table, source=config_source if config_text is not None else "options")
+
+
+# ---------------------------------------------------------------------------- running
+
+
+def resolve_weights(skeleton: Skeleton, weights: tuple[tuple[str, float], ...]) -> np.ndarray:
+    """Per-joint weights ``(J,)`` from ``(pattern, weight)`` pairs; later pairs win.
+
+    A pattern is a limb name (its joints and everything below its end), an
+    exact joint name, or a shell pattern over joint names.
+    """
+    out = np.ones(skeleton.num_joints)
+    limbs = None
+    for pattern, weight in weights:
+        if pattern in LIMB_NAMES:
+            limbs = find_limbs(skeleton) if limbs is None else limbs
+            if pattern not in limbs:
+                raise ConfigError(f"weight {pattern}={weight:g}: no {pattern} found on this skeleton")
+            joints = limb_joints(skeleton, limbs[pattern])
+        elif pattern in skeleton.names:
+            joints = np.array([skeleton.index(pattern)])
+        else:
+            joints = skeleton.match(pattern)
+            if not len(joints):
+                sample = ", ".join(skeleton.names[:6])
+                raise ConfigError(
+                    f"weight {pattern}={weight:g}: no joint or limb matches {pattern!r} "
+                    f"(joints: {sample}, ...; limbs: {', '.join(LIMB_NAMES)})"
+                )
+        out[joints] = weight
+    return out
+
+
+@dataclass
+class PipelineResult:
+    """A run's output and what happened on the way.
+
+    motion : the output Motion (6 channels on every joint)
+    world_positions : (F, J, 3) float64 positions the output's FK reproduces
+    rest_frames : leading synthetic rest frames kept out of the filters
+    timings : seconds per block, in run order
+    correct_report : CorrectReport or None when correction was off
+    """
+
+    motion: Motion
+    world_positions: np.ndarray
+    rest_frames: int
+    rest_frames_dropped: bool
+    timings: dict[str, float]
+    correct_report: CorrectReport | None = None
+    max_link_stretch: float = 1.0
+    notes: list[str] = field(default_factory=list)
+
+
+def run(motion: Motion, config: PipelineConfig | None = None) -> PipelineResult:
+    """Run the blocks that are switched on over a whole clip."""
+    config = config or PipelineConfig()
+    timings: dict[str, float] = {}
+    notes: list[str] = []
+
+    start = time.perf_counter()
+    rest = detect_rest_frames(motion) if config.input.tpose in ("auto", "drop") else 0
+    dropped = config.input.tpose == "drop" and rest > 0
+    if dropped:
+        motion = motion.slice(slice(rest, None))
+        notes.append(f"dropped {rest} leading rest-pose frame(s)")
+    elif rest:
+        notes.append(f"kept {rest} leading rest-pose frame(s) out of the filters, unchanged")
+    world = motion.world_positions()
+    timings["forward_kinematics"] = time.perf_counter() - start
+
+    first = 0 if dropped else rest
+    body = world[first:]
+    skeleton = motion.skeleton
+
+    if config.extrapolate.enabled:
+        start = time.perf_counter()
+        weights = resolve_weights(skeleton, config.extrapolate.weights)
+        body = extrapolate(
+            body,
+            sigma=config.extrapolate.sigma_frames(motion.frame_time),
+            omega=config.extrapolate.omega,
+            weights=weights,
+        )
+        timings["extrapolate"] = time.perf_counter() - start
+
+    report = None
+    if config.correct.enabled:
+        start = time.perf_counter()
+        body, report = correct(
+            body,
+            skeleton.parents,
+            skeleton.link_lengths(),
+            threshold=config.correct.threshold,
+            delta=config.correct.delta,
+            max_stretch=config.correct.max_stretch,
+            max_iter=config.correct.max_iter,
+        )
+        if report.unconverged_frames:
+            notes.append(f"correction stopped at max_iter with {report.unconverged_frames} frame(s) above threshold")
+        timings["correct"] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    positions = world.copy()
+    positions[first:] = body
+    out = positions_to_motion(positions, motion)
+    timings["orient"] = time.perf_counter() - start
+
+    lengths = skeleton.link_lengths()
+    long_links = lengths > 1e-9 * max(lengths.max(), 1e-12)
+    long_links[0] = False
+    stretch = 1.0
+    if long_links.any():
+        current = np.linalg.norm(positions[:, long_links] - positions[:, skeleton.parents[long_links]], axis=-1)
+        stretch = float((current / lengths[long_links]).max())
+    return PipelineResult(out, positions, rest, dropped, timings, report, stretch, notes)
+
+
+def exaggerate(motion: Motion, config: PipelineConfig | None = None, **preset: Any) -> Motion:
+    """Exaggerate a clip with ``config`` (default: the `DEFAULT_PRESET` preset); the output Motion.
+
+    >>> from mocap_exaggerate import load_bvh, exaggerate, save_bvh  # doctest: +SKIP
+    >>> save_bvh(exaggerate(load_bvh("walk.bvh")), "walk_cartoon.bvh")  # doctest: +SKIP
+    """
+    if config is None:
+        config = load_preset(preset.pop("preset", DEFAULT_PRESET))
+    if preset:
+        raise TypeError(f"unexpected arguments: {', '.join(preset)}")
+    return run(motion, config).motion
+
+
+def file_digest(data: bytes) -> str:
+    return "sha256:" + hashlib.sha256(data).hexdigest()
+
+
+def manifest(
+    *,
+    input_name: str,
+    input_bytes: bytes,
+    config: PipelineConfig,
+    preset: str | None,
+    result: PipelineResult,
+    outputs: dict[str, str],
+    read_seconds: float,
+    write_seconds: float,
+    reader_warnings: list[str],
+    frames_in: int,
+    fps: float,
+) -> dict[str, Any]:
+    """The JSON manifest that records how an output was made.
+
+    Timings are the only part that varies between identical runs; they are
+    kept apart under ``timings`` so a comparison can ignore them.
+    """
+    info: dict[str, Any] = {
+        "tool": "mocap_exaggerate",
+        "version": __version__,
+        "input": {"file": input_name, "hash": file_digest(input_bytes), "frames": frames_in, "fps": fps},
+        "preset": preset,
+        "config": config.to_dict(),
+        "stages": [s for s in STAGES if getattr(config, s).enabled],
+        "rest_frames": {"count": result.rest_frames, "dropped": result.rest_frames_dropped},
+        "outputs": outputs,
+        "result": {
+            "frames": result.motion.num_frames,
+            "joints": result.motion.skeleton.num_joints,
+            "max_link_stretch": round(result.max_link_stretch, 6),
+        },
+        "warnings": list(reader_warnings) + list(result.notes),
+        "timings": {"read": read_seconds, **result.timings, "write": write_seconds},
+    }
+    if result.correct_report is not None:
+        info["result"]["correct"] = {
+            k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(result.correct_report).items()
+        }
+    return info

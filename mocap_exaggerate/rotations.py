@@ -1,0 +1,210 @@
+"""Quaternion and Euler helpers over whole arrays.
+
+Glossary
+--------
+q, quat
+    Unit quaternion stored scalar-last, ``(..., 4)`` as ``x, y, z, w``: the
+    order of ``scipy.spatial.transform.Rotation`` and of glTF.
+order
+    Three upper-case axis letters such as ``"ZXY"``: the BVH channel order.
+    BVH rotations are *intrinsic* in channel order, ``R = R_Z @ R_X @ R_Y``
+    for ``ZXY``, which is scipy's upper-case (intrinsic) convention.
+euler
+    Angles in degrees, ``(..., 3)``, the i-th angle about ``order[i]``.
+
+Every function broadcasts over leading axes and never mutates its input.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = [
+    "quat_identity",
+    "quat_mul",
+    "quat_inv",
+    "quat_rotate",
+    "quat_normalize",
+    "quat_angle",
+    "quat_from_axis_angle",
+    "quat_from_euler",
+    "quat_to_euler",
+    "quat_unroll",
+]
+
+
+def quat_identity(shape: tuple[int, ...] = ()) -> np.ndarray:
+    """Identity quaternions of the given leading shape, ``shape + (4,)``."""
+    q = np.zeros(shape + (4,))
+    q[..., 3] = 1.0
+    return q
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` (apply ``b`` first, then ``a``)."""
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=-1,
+    )
+
+
+def quat_inv(q: np.ndarray) -> np.ndarray:
+    """Inverse of unit quaternions (the conjugate)."""
+    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)``."""
+    u = q[..., :3]
+    w = q[..., 3:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quat_normalize(q: np.ndarray) -> np.ndarray:
+    """Scale quaternions to unit length."""
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle in radians of the rotation taking ``a`` to ``b``, in ``[0, pi]``."""
+    # atan2 of the relative rotation keeps full precision for tiny angles,
+    # where arccos of the dot product loses half the digits.
+    rel = quat_mul(quat_inv(a), b)
+    return 2.0 * np.arctan2(np.linalg.norm(rel[..., :3], axis=-1), np.abs(rel[..., 3]))
+
+
+def quat_from_axis_angle(axis: str, angle: np.ndarray) -> np.ndarray:
+    """Quaternions for rotations by ``angle`` radians about the named axis ``"X"|"Y"|"Z"``."""
+    half = 0.5 * np.asarray(angle, dtype=np.float64)
+    q = np.zeros(half.shape + (4,))
+    q[..., "XYZ".index(axis)] = np.sin(half)
+    q[..., 3] = np.cos(half)
+    return q
+
+
+def quat_from_euler(euler: np.ndarray, order: str) -> np.ndarray:
+    """Quaternions from intrinsic Euler angles in degrees.
+
+    euler : (..., 3) float64, the i-th angle about ``order[i]``
+
+    Composed from three axis quaternions, ``q = q0 * q1 * q2``; this is the
+    same rotation as ``Rotation.from_euler(order, euler, degrees=True)`` but
+    about eight times faster on whole clips.
+    """
+    radians = np.deg2rad(np.asarray(euler, dtype=np.float64))
+    order = order.upper()
+    q = quat_from_axis_angle(order[0], radians[..., 0])
+    q = quat_mul(q, quat_from_axis_angle(order[1], radians[..., 1]))
+    return quat_mul(q, quat_from_axis_angle(order[2], radians[..., 2]))
+
+
+def quat_to_euler(
+    q: np.ndarray, order: str, reference: np.ndarray | None = None
+) -> np.ndarray:
+    """Intrinsic Euler angles in degrees, choosing among equivalent solutions.
+
+    A rotation has two Tait-Bryan solutions, ``(a, b, c)`` and
+    ``(a + 180, 180 - b, c + 180)``, each defined up to whole turns. With a
+    ``reference (..., 3)`` the solution and turns nearest to it are taken, so
+    a clip written back keeps the angles it was read with. Without one the
+    angles are made continuous along axis 0 (time), which is what animators
+    expect of channel curves.
+
+    q : (F, ..., 4) float64 unit quaternions
+    """
+    q = np.asarray(q, dtype=np.float64)
+    lead = q.shape[:-1]
+    flat = q.reshape(-1, 4)
+    if len(flat) == 0:
+        return np.zeros(lead + (3,))
+    with warnings.catch_warnings():
+        # At gimbal lock scipy warns and zeroes the third angle; the choice
+        # below (or the caller's exact reference) settles those frames.
+        warnings.simplefilter("ignore", UserWarning)
+        first = Rotation.from_quat(flat).as_euler(order.upper(), degrees=True)
+    first = first.reshape(lead + (3,))
+    locked = np.abs(np.abs(first[..., 1]) - 90.0) < 1e-6
+    if np.any(locked):
+        # At gimbal lock only a combination of the outer angles is fixed. Take
+        # the third angle from the reference, else from the previous unlocked
+        # frame, and solve the first angle for it.
+        if reference is not None:
+            third = np.broadcast_to(reference, first.shape)[..., 2]
+        else:
+            third = _fill_from_unlocked(first[..., 2], locked)
+        first = np.where(locked[..., None], _solve_first_angle(q, first[..., 1], third, order), first)
+    second = first + np.array([180.0, 0.0, 180.0])
+    second[..., 1] = 180.0 - first[..., 1]
+    if reference is not None:
+        reference = np.broadcast_to(np.asarray(reference, dtype=np.float64), first.shape)
+        a = _wrap_near(first, reference)
+        b = _wrap_near(second, reference)
+        pick_b = np.sum(np.abs(b - reference), axis=-1) < np.sum(np.abs(a - reference), axis=-1)
+        chosen = np.where(pick_b[..., None], b, a)
+        # Where the reference itself describes this rotation, keep it exactly:
+        # conversion near gimbal lock loses digits the reference still has.
+        same = quat_angle(quat_from_euler(reference, order), q) < 1e-9
+        return np.where(same[..., None], reference, chosen)
+    if first.ndim < 2 or first.shape[0] < 2:
+        return first
+    # Flip to the other solution where it is nearer the previous frame's pick.
+    # The two solutions map onto each other by an involution that keeps
+    # distances, so whether frame t flips does not depend on earlier picks:
+    # the parity of the flips so far says which solution each frame uses.
+    near_same = np.sum(np.abs(_wrap_near(first[1:], first[:-1]) - first[:-1]), axis=-1)
+    near_other = np.sum(np.abs(_wrap_near(second[1:], first[:-1]) - first[:-1]), axis=-1)
+    flip = near_other < near_same
+    use_second = np.concatenate([np.zeros((1,) + flip.shape[1:], bool), np.cumsum(flip, axis=0) % 2 == 1])
+    chosen = np.where(use_second[..., None], second, first)
+    return np.unwrap(chosen, period=360.0, axis=0)
+
+
+def _fill_from_unlocked(values: np.ndarray, locked: np.ndarray) -> np.ndarray:
+    """Replace locked entries along axis 0 by the last unlocked one before (else after, else 0)."""
+    if values.ndim == 0:
+        return np.where(locked, 0.0, values)
+    frames = values.shape[0]
+    index = np.where(~locked, np.arange(frames).reshape((-1,) + (1,) * (values.ndim - 1)), -1)
+    last = np.maximum.accumulate(index, axis=0)
+    nxt = np.flip(np.minimum.accumulate(np.flip(np.where(index < 0, frames, index), 0), axis=0), 0)
+    source = np.where(last >= 0, last, nxt)
+    filled = np.take_along_axis(values, np.clip(source, 0, frames - 1), axis=0)
+    return np.where(source < frames, filled, 0.0)
+
+
+def _solve_first_angle(q: np.ndarray, second: np.ndarray, third: np.ndarray, order: str) -> np.ndarray:
+    """Euler triples ``(a, second, third)`` with ``a`` chosen so the triple gives ``q``."""
+    order = order.upper()
+    rest = quat_mul(
+        quat_from_axis_angle(order[1], np.deg2rad(second)), quat_from_axis_angle(order[2], np.deg2rad(third))
+    )
+    first_q = quat_mul(q, quat_inv(rest))
+    axis = "XYZ".index(order[0])
+    a = np.degrees(2.0 * np.arctan2(first_q[..., axis], first_q[..., 3]))
+    a = (a + 180.0) % 360.0 - 180.0
+    return np.stack([a, second, third], axis=-1)
+
+
+def _wrap_near(angles: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Add whole turns to ``angles`` to bring each nearest to ``reference``."""
+    return angles + 360.0 * np.round((reference - angles) / 360.0)
+
+
+def quat_unroll(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Flip quaternion signs so neighbours along ``axis`` lie in one hemisphere."""
+    q = np.moveaxis(np.asarray(q, dtype=np.float64), axis, 0)
+    dots = np.sum(q[1:] * q[:-1], axis=-1)
+    flips = np.concatenate([np.zeros((1,) + dots.shape[1:], bool), np.cumsum(dots < 0, axis=0) % 2 == 1])
+    q = np.where(flips[..., None], -q, q)
+    return np.moveaxis(q, 0, axis)

@@ -1,0 +1,156 @@
+"""The skeleton: joint names, a parents vector, rest offsets and the BVH channel layout."""
+
+from __future__ import annotations
+
+import fnmatch
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Skeleton", "POSITION_CHANNELS", "ROTATION_CHANNELS"]
+
+POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
+ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
+
+
+@dataclass(frozen=True, eq=False)
+class Skeleton:
+    """A joint hierarchy as arrays.
+
+    Attributes
+    ----------
+    names : tuple of str, length J
+    parents : (J,) int64, -1 for the root; ``parents[j] < j`` always
+    offsets : (J, 3) float64, rest offset of each joint from its parent
+    channels : tuple of J tuples of BVH channel names as read, e.g.
+        ``("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")``
+    end_sites : (J, 3) float64, End Site offset of each joint, NaN where a joint has none
+    """
+
+    names: tuple[str, ...]
+    parents: np.ndarray
+    offsets: np.ndarray
+    channels: tuple[tuple[str, ...], ...]
+    end_sites: np.ndarray
+    _index: dict[str, int] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        parents = np.asarray(self.parents, dtype=np.int64)
+        offsets = np.asarray(self.offsets, dtype=np.float64)
+        end_sites = np.asarray(self.end_sites, dtype=np.float64)
+        n = len(self.names)
+        if parents.shape != (n,) or offsets.shape != (n, 3) or end_sites.shape != (n, 3):
+            raise ValueError(
+                f"skeleton arrays disagree: {n} names, parents {parents.shape}, "
+                f"offsets {offsets.shape}, end_sites {end_sites.shape}"
+            )
+        if len(self.channels) != n:
+            raise ValueError(f"skeleton has {n} joints but {len(self.channels)} channel lists")
+        if n == 0 or parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, n)):
+            raise ValueError("parents must start with the root (-1) and list every parent before its children")
+        for array in (parents, offsets, end_sites):
+            array.setflags(write=False)
+        object.__setattr__(self, "parents", parents)
+        object.__setattr__(self, "offsets", offsets)
+        object.__setattr__(self, "end_sites", end_sites)
+        object.__setattr__(self, "channels", tuple(tuple(c) for c in self.channels))
+        object.__setattr__(self, "_index", {name: j for j, name in enumerate(self.names)})
+
+    # ------------------------------------------------------------------ topology
+    @property
+    def num_joints(self) -> int:
+        return len(self.names)
+
+    def index(self, name: str) -> int:
+        """Index of the joint called ``name``; ``KeyError`` naming it if absent."""
+        try:
+            return self._index[name]
+        except KeyError:
+            raise KeyError(f"no joint named {name!r}") from None
+
+    def children(self, joint: int) -> np.ndarray:
+        """Indices of the direct children of ``joint``."""
+        return np.flatnonzero(self.parents == joint)
+
+    def descendants(self, joint: int) -> np.ndarray:
+        """Indices of ``joint`` and every joint below it, in order."""
+        inside = np.zeros(self.num_joints, bool)
+        inside[joint] = True
+        for j in range(joint + 1, self.num_joints):
+            inside[j] = inside[self.parents[j]]
+        return np.flatnonzero(inside)
+
+    def depth(self) -> np.ndarray:
+        """Number of links from the root to each joint, ``(J,)``."""
+        depth = np.zeros(self.num_joints, np.int64)
+        for j in range(1, self.num_joints):
+            depth[j] = depth[self.parents[j]] + 1
+        return depth
+
+    def match(self, pattern: str) -> np.ndarray:
+        """Indices of joints whose name matches a shell pattern (``Left*``), case-sensitive."""
+        return np.array(
+            [j for j, name in enumerate(self.names) if fnmatch.fnmatchcase(name, pattern)],
+            dtype=np.int64,
+        )
+
+    # ------------------------------------------------------------------ channels
+    def rotation_order(self, joint: int) -> str:
+        """Intrinsic rotation order of ``joint`` as three letters, e.g. ``"ZXY"``.
+
+        Axes the joint has no channel for are appended (their angle is zero),
+        so every joint has a full order.
+        """
+        axes = "".join(c[0].upper() for c in self.channels[joint] if c in ROTATION_CHANNELS)
+        return axes + "".join(a for a in "ZXY" if a not in axes)
+
+    def has_position_channels(self, joint: int) -> bool:
+        return any(c in POSITION_CHANNELS for c in self.channels[joint])
+
+    @property
+    def num_channels(self) -> int:
+        return sum(len(c) for c in self.channels)
+
+    def with_full_channels(self) -> Skeleton:
+        """The same skeleton with position and rotation channels on every joint.
+
+        Rotation orders are kept joint by joint, so channel curves stay
+        comparable with the input's.
+        """
+        channels = tuple(
+            POSITION_CHANNELS + tuple(f"{a}rotation" for a in self.rotation_order(j))
+            for j in range(self.num_joints)
+        )
+        return Skeleton(self.names, self.parents, self.offsets, channels, self.end_sites)
+
+    # ------------------------------------------------------------------ geometry
+    def rest_positions(self) -> np.ndarray:
+        """World positions of the joints in the rest pose (offsets only), ``(J, 3)``."""
+        pos = np.zeros((self.num_joints, 3))
+        pos[0] = self.offsets[0]
+        for j in range(1, self.num_joints):
+            pos[j] = pos[self.parents[j]] + self.offsets[j]
+        return pos
+
+    def link_lengths(self) -> np.ndarray:
+        """Rest length of the link from each joint's parent to it, ``(J,)``; 0 for the root."""
+        lengths = np.linalg.norm(self.offsets, axis=1)
+        lengths[0] = 0.0
+        return lengths
+
+    def up_axis(self) -> int:
+        """Index (0, 1, 2) of the axis the body stands along in the rest pose.
+
+        Legs and spine together are longer than the arms, so the axis that
+        carries most of the summed link length is taken as up.
+        """
+        return int(np.argmax(np.abs(self.offsets[1:]).sum(axis=0)))
+
+    def height(self) -> float:
+        """Extent of the rest pose along the up axis: the natural length scale."""
+        rest = self.rest_positions()
+        ends = rest[np.isfinite(self.end_sites[:, 0])] + self.end_sites[np.isfinite(self.end_sites[:, 0])]
+        points = np.concatenate([rest, ends])
+        axis = self.up_axis()
+        extent = float(np.ptp(points[:, axis]))
+        return extent if extent > 0 else float(np.ptp(points, axis=0).max() or 1.0)

@@ -1,0 +1,53 @@
+"""Detecting the synthetic rest pose that many CMU conversions put first.
+
+The cgspeed conversions prepend a T-pose frame; the Daz-friendly ones then
+take a few more frames to settle (fingers swing 150 % of the body height per
+frame). A temporal filter rings on such a jump, so these leading frames are
+kept out of every time filter and written back unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..motion import Motion
+from ..rotations import quat_angle
+
+__all__ = ["detect_rest_frames", "REST_POSE_MAX_ANGLE", "JUMP_FACTOR"]
+
+#: Frame 0 counts as a rest pose only if no non-root joint is turned more than this (degrees).
+REST_POSE_MAX_ANGLE = 30.0
+#: A leading frame is synthetic when the pose jumps this many times the clip's median per-frame change.
+JUMP_FACTOR = 8.0
+
+
+def detect_rest_frames(motion: Motion) -> int:
+    """Number of leading frames that are a synthetic rest pose and its settling (0 if none).
+
+    Frame 0 is a rest frame when (a) every non-root joint is within
+    `REST_POSE_MAX_ANGLE` of its rest orientation and (b) the root-relative
+    pose then jumps by more than `JUMP_FACTOR` times the clip's median
+    per-frame change (and by over 1 % of the skeleton height). Frames after it
+    count too while the jump into the next frame stays that large.
+    """
+    if motion.num_frames < 4:
+        return 0
+    rot = motion.local_rotations
+    identity = np.zeros(4)
+    identity[3] = 1.0
+    turned = np.degrees(quat_angle(rot[0, 1:], identity))
+    if turned.size and turned.max() > REST_POSE_MAX_ANGLE:
+        return 0
+    world = motion.world_positions()
+    pose = world - world[:, :1]
+    # Median over joints: a handful of wobbling fingers should not decide it.
+    jump = np.median(np.linalg.norm(pose[1:] - pose[:-1], axis=-1), axis=1)
+    typical = float(np.median(jump))
+    height = motion.skeleton.height()
+    limit = max(JUMP_FACTOR * typical, 0.01 * height)
+    if jump[0] <= limit:
+        return 0
+    above = jump > limit
+    # Leading run of large jumps; frames up to and including its last start are synthetic.
+    run = int(np.argmin(above)) if not above.all() else len(above)
+    return min(run, motion.num_frames - 2)

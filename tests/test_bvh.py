@@ -1,0 +1,214 @@
+"""BVH reading and writing on real clips, with bvhio as an independent oracle."""
+
+import re
+
+import bvhio
+import numpy as np
+import pytest
+
+from mocap_exaggerate.errors import InputError
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh, save_bvh
+from mocap_exaggerate.io.files import OutputExistsError
+
+from .helpers import all_clip_params, shared, shared_clip_params
+
+# frames, joints, End Sites, channels: from ../shared/data/bvh/SOURCES.md
+EXPECTED = {
+    "assimp_boxing_toes": (3069, 21, 5, 66),
+    "cmu_01_01_forward_jumps": (2752, 31, 7, 96),
+    "cmu_05_06_dance_cartwheel_start_iclone": (443, 100, 41, 303),
+    "cmu_06_15_basketball_dribble_shoot_iclone": (273, 100, 41, 303),
+    "cmu_09_01_run_daz": (149, 43, 14, 132),
+    "cmu_10_01_soccer_kick_daz": (802, 43, 14, 132),
+    "cmu_12_01_walk": (524, 31, 7, 96),
+    "cmu_131_01_walk_start_stop_max": (994, 31, 7, 96),
+    "cmu_14_19_laugh_idle_daz": (2727, 43, 14, 132),
+    "cmu_16_01_jump_amc2bvh": (322, 31, 7, 96),
+    "makehuman_zombie_walk_keyframed": (31, 75, 16, 228),
+    "mocapbank_sit_down_stand_up": (455, 19, 5, 60),
+}
+
+
+def channel_values(motion):
+    from mocap_exaggerate.io.bvh import motion_channels
+
+    return motion_channels(motion)
+
+
+@pytest.mark.parametrize("path", all_clip_params())
+def test_reads_counts_from_sources_table(path):
+    motion, report = read_bvh(path)
+    frames, joints, end_sites, channels = EXPECTED[path.stem]
+    assert motion.num_frames == frames
+    assert motion.skeleton.num_joints == joints
+    assert int(np.isfinite(motion.skeleton.end_sites[:, 0]).sum()) == end_sites
+    assert motion.skeleton.num_channels == channels
+    assert np.all(np.isfinite(motion.local_rotations))
+    assert np.allclose(np.linalg.norm(motion.local_rotations, axis=-1), 1.0)
+
+
+@pytest.mark.parametrize("path", all_clip_params())
+def test_round_trip_keeps_every_channel_and_the_layout(path):
+    motion, _ = read_bvh(path)
+    data = format_bvh(motion)
+    again, _ = read_bvh(data)
+    assert again.skeleton.names == motion.skeleton.names
+    assert again.skeleton.channels == motion.skeleton.channels
+    assert np.array_equal(again.skeleton.parents, motion.skeleton.parents)
+    assert np.allclose(again.skeleton.offsets, motion.skeleton.offsets, atol=1e-6)
+    assert np.allclose(again.skeleton.end_sites, motion.skeleton.end_sites, atol=1e-6, equal_nan=True)
+    assert again.frame_time == pytest.approx(motion.frame_time, rel=1e-12)
+    assert np.max(np.abs(channel_values(again) - channel_values(motion))) <= 1e-4
+    # Raw numbers in the source file agree too (the reader does not alter them).
+    raw = np.array(path.read_bytes().split()[-(motion.num_frames * motion.skeleton.num_channels):], dtype=float)
+    if "boxing" not in path.stem:  # that file has one row more than declared
+        assert np.max(np.abs(channel_values(again).ravel() - raw)) <= 1e-4
+    # Written a second time, the bytes are the same.
+    assert format_bvh(again) == data
+
+
+def test_written_numbers_are_fixed_point_with_lf_and_full_frame_time(sample_clip):
+    motion, _ = read_bvh(sample_clip)
+    text = format_bvh(motion).decode("ascii")
+    assert "\r" not in text
+    assert not re.search(r"\d[eE][-+]?\d", text)
+    assert "-0.000000 " not in text
+    assert "Frame Time: 0.00833333\n" in text
+
+
+@pytest.mark.parametrize("path", shared_clip_params())
+def test_world_positions_match_bvhio(path):
+    motion, _ = read_bvh(path)
+    root = bvhio.readAsHierarchy(str(path))
+    layout = root.layout()
+    names = [joint.Name for joint, _, _ in layout]
+    assert names == list(motion.skeleton.names)
+    ours = motion.world_positions()
+    tolerance = 1e-4 * motion.skeleton.height()
+    frames = np.unique(np.linspace(0, motion.num_frames - 1, 12).astype(int))
+    for f in frames:
+        root.loadPose(int(f))
+        theirs = np.array([list(joint.PositionWorld) for joint, _, _ in layout])
+        assert np.max(np.abs(ours[f] - theirs)) < tolerance, f"frame {f}"
+
+
+def test_boxing_extra_row_is_a_warning_and_the_declared_count_is_kept():
+    motion, report = read_bvh(shared("assimp_boxing_toes.bvh"))
+    assert motion.num_frames == 3069
+    assert report.data_lines == 3070
+    assert any("3070" in w for w in report.warnings)
+
+
+def test_fps_override_for_wrong_header():
+    motion, report = read_bvh(shared("cmu_16_01_jump_amc2bvh.bvh"), fps=120)
+    assert motion.frame_time == pytest.approx(1 / 120)
+    assert report.header_fps == pytest.approx(30, rel=1e-4)
+    assert any("120" in w for w in report.warnings)
+
+
+def make_bvh(body: str, motion: str = "Frames: 2\nFrame Time: 0.1\n0 0 0 0 0 0 0 0 0\n1 2 3 10 20 30 5 6 7\n") -> bytes:
+    return f"HIERARCHY\n{body}MOTION\n{motion}".encode()
+
+
+SIMPLE = """ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Spine
+  {
+    OFFSET 0 1 0
+    CHANNELS 3 Xrotation Yrotation Zrotation
+    End Site
+    {
+      OFFSET 0 1 0
+    }
+  }
+}
+"""
+
+
+def test_layout_variants_read():
+    # "{" on the name line, a name with spaces, a leaf without End Site, position channels on a
+    # non-root joint, scientific notation, CRLF, tabs, TAB after Frames:, ".1" frame time.
+    text = (
+        "HIERARCHY\r\nROOT Bip01 Pelvis {\r\n\tOFFSET 0 0 0\r\n"
+        "\tCHANNELS 3 Xposition Yposition Zposition\r\n"
+        "\tJOINT Arm\n\t{\n\t\tOFFSET 1e0 0 -0.00000\n\t\tCHANNELS 6 Yrotation Xposition Zrotation Yposition Xrotation Zposition\n\t}\n"
+        "}\r\nMOTION\r\nFrames:\t1\r\nFrame Time: .1\r\n"
+        "1 2 3 90 4 0 5 0 6\r\n"
+    ).encode()
+    motion, _ = read_bvh(text)
+    assert motion.skeleton.names == ("Bip01 Pelvis", "Arm")
+    assert motion.skeleton.rotation_order(1) == "YZX"
+    assert motion.frame_time == pytest.approx(0.1)
+    assert np.allclose(motion.local_positions[0, 1], [4, 5, 6])
+    world = motion.world_positions()
+    assert np.allclose(world[0, 1], [1 + 4, 2 + 5, 3 + 6])
+    assert format_bvh(read_bvh(format_bvh(motion))[0]) == format_bvh(motion)
+
+
+def test_one_frame_is_valid():
+    motion, _ = read_bvh(make_bvh(SIMPLE, "Frames: 1\nFrame Time: 0.1\n1 2 3 10 20 30 5 6 7\n"))
+    assert motion.num_frames == 1
+    assert np.allclose(motion.world_positions()[0, 0], [1, 2, 3])
+
+
+MALFORMED = {
+    "empty": (b"", 1, "empty"),
+    "not bvh": (b"{\"json\": true}\n", 1, "HIERARCHY"),
+    "binary": (b"\x00\x01\x02HIERARCHY", 1, "binary"),
+    "no root": (b"HIERARCHY\nJOINT x\n", 2, "ROOT"),
+    "no motion": (make_bvh(SIMPLE, "")[: -len(b"MOTION\n")], 15, "MOTION"),
+    "unknown channel": (make_bvh(SIMPLE.replace("Zrotation Xrotation", "Wrotation Xrotation")), 5, "Wrotation"),
+    "channel count too big": (make_bvh(SIMPLE.replace("CHANNELS 3", "CHANNELS 4")), 9, "CHANNELS"),
+    "channel count not a number": (make_bvh(SIMPLE.replace("CHANNELS 3", "CHANNELS three")), 9, "three"),
+    "offset not a number": (make_bvh(SIMPLE.replace("OFFSET 0 1 0\n    CHANNELS", "OFFSET 0 x 0\n    CHANNELS")), 8, "OFFSET"),
+    "missing brace": (make_bvh(SIMPLE.replace("  JOINT Spine\n  {", "  JOINT Spine\n")), 8, "{"),
+    "unbalanced": (make_bvh(SIMPLE + "}\n"), 16, "unbalanced"),
+    "two roots": (make_bvh(SIMPLE + SIMPLE), 16, "ROOT"),
+    "duplicate name": (make_bvh(SIMPLE.replace("JOINT Spine", "JOINT Hips")), 6, "twice"),
+    "frames missing": (make_bvh(SIMPLE, "Frame Time: 0.1\n1 2 3 4 5 6 7 8 9\n"), 17, "Frames"),
+    "frames not number": (make_bvh(SIMPLE, "Frames: many\nFrame Time: 0.1\n"), 17, "many"),
+    "zero frames": (make_bvh(SIMPLE, "Frames: 0\nFrame Time: 0.1\n"), 17, "no frames"),
+    "negative frame time": (make_bvh(SIMPLE, "Frames: 1\nFrame Time: -0.1\n1 2 3 4 5 6 7 8 9\n"), 18, "frame time"),
+    "frame time missing": (make_bvh(SIMPLE, "Frames: 1\n1 2 3 4 5 6 7 8 9\n"), 18, "Frame Time"),
+    "too few lines": (make_bvh(SIMPLE, "Frames: 3\nFrame Time: 0.1\n1 2 3 4 5 6 7 8 9\n1 2 3 4 5 6 7 8 9\n"), 20, "only 2 complete"),
+    "truncated line": (make_bvh(SIMPLE, "Frames: 2\nFrame Time: 0.1\n1 2 3 4 5 6 7 8 9\n1 2 3 4 5\n"), 20, "truncated"),
+    "short line inside": (make_bvh(SIMPLE, "Frames: 2\nFrame Time: 0.1\n1 2 3 4\n1 2 3 4 5 6 7 8 9\n"), 19, "4 values"),
+    "bad number": (make_bvh(SIMPLE, "Frames: 2\nFrame Time: 0.1\n1 2 3 4 5 6 7 8 9\n1 2 3 4 five 6 7 8 9\n"), 20, "five"),
+    "nan value": (make_bvh(SIMPLE, "Frames: 1\nFrame Time: 0.1\n1 2 nan 4 5 6 7 8 9\n"), 19, "nan"),
+    "end site without offset": (make_bvh(SIMPLE.replace("      OFFSET 0 1 0\n    }", "    }")), 12, "OFFSET"),
+    "joint without offset": (make_bvh(SIMPLE.replace("    OFFSET 0 1 0\n    CHANNELS 3", "    CHANNELS 3")), 13, "OFFSET"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(MALFORMED))
+def test_malformed_input_names_file_line_and_problem(name):
+    data, line, words = MALFORMED[name]
+    with pytest.raises(InputError) as caught:
+        read_bvh(data, name="bad.bvh")
+    error = caught.value
+    message = str(error)
+    assert message.startswith("bad.bvh:"), message
+    assert "\n" not in message
+    assert error.line == line, message
+    assert words.lower() in message.lower(), message
+
+
+def test_save_is_atomic_and_refuses_to_overwrite(tmp_path, sample_clip):
+    motion, _ = read_bvh(sample_clip)
+    target = tmp_path / "out.bvh"
+    save_bvh(motion, target, overwrite=False)
+    before = target.read_bytes()
+    with pytest.raises(OutputExistsError, match="--overwrite"):
+        save_bvh(motion, target, overwrite=False)
+    assert target.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.bvh"]
+
+
+def test_writer_refuses_nan(sample_clip):
+    motion, _ = read_bvh(sample_clip)
+    positions = motion.local_positions.copy()
+    positions[3, 0, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        format_bvh(motion.replace(local_positions=positions))
