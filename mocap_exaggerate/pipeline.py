@@ -115,6 +115,8 @@ class PipelineConfig:
                 values["max_iter"] = int(values["max_iter"])
             try:
                 blocks[key] = block_type(**values)
+            except ConfigError as error:
+                raise ConfigError(f"{source}: {error}") from None
             except TypeError as error:
                 raise ConfigError(f"{source}: [{key}]: {error}") from None
         try:

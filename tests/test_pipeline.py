@@ -1,0 +1,195 @@
+"""The pipeline end to end on real clips: invariants, presets, configs, determinism."""
+
+import numpy as np
+import pytest
+
+from mocap_exaggerate import exaggerate, load_bvh
+from mocap_exaggerate.errors import ConfigError
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
+from mocap_exaggerate.limbs import _side_from_name, find_limbs
+from mocap_exaggerate.pipeline import (
+    PipelineConfig,
+    load_preset,
+    preset_names,
+    resolve_config,
+    resolve_weights,
+    run,
+)
+from mocap_exaggerate.stages.tpose import detect_rest_frames
+
+from .helpers import all_clip_params, shared, shared_clip_params
+
+IDENTITY = {"extrapolate": {"omega": 1.0}, "correct": {"enabled": False}}
+
+
+@pytest.mark.parametrize("path", all_clip_params())
+def test_written_file_reproduces_the_computed_positions(path):
+    motion, _ = read_bvh(path)
+    result = run(motion, load_preset("looney"))
+    written, _ = read_bvh(format_bvh(result.motion))
+    assert written.skeleton.names == motion.skeleton.names
+    assert all(len(c) == 6 for c in written.skeleton.channels)
+    error = np.max(np.abs(written.world_positions() - result.world_positions))
+    assert error <= 1e-4 * motion.skeleton.height()
+    # Exaggeration did something: some link got longer than captured.
+    assert result.max_link_stretch > 1.01
+
+
+@pytest.mark.parametrize("path", all_clip_params())
+def test_omega_one_with_correction_off_gives_the_input_back(path):
+    motion, _ = read_bvh(path)
+    result = run(motion, resolve_config("cartoon", None, IDENTITY))
+    written, _ = read_bvh(format_bvh(result.motion))
+    height = motion.skeleton.height()
+    assert np.max(np.abs(result.world_positions - motion.world_positions())) <= 1e-6 * height
+    assert np.max(np.abs(written.world_positions() - motion.world_positions())) <= 1e-4 * height
+
+
+EXPECTED_REST_FRAMES = {
+    "cmu_01_01_forward_jumps": 1,
+    "cmu_12_01_walk": 1,
+    "cmu_09_01_run_daz": 4,
+    "cmu_10_01_soccer_kick_daz": 5,
+    "cmu_14_19_laugh_idle_daz": 5,
+}
+
+
+@pytest.mark.parametrize("path", shared_clip_params())
+def test_rest_pose_detection_on_real_clips(path):
+    # SOURCES.md: the cgspeed mb2 and Daz conversions start with a T-pose; the Daz ones then
+    # settle for a few frames; the iClone, 3dsMax, amc2bvh, boxing, mocapbank and MakeHuman
+    # files have none.
+    motion, _ = read_bvh(path)
+    assert detect_rest_frames(motion) == EXPECTED_REST_FRAMES.get(path.stem, 0)
+
+
+def test_rest_frames_are_written_unchanged_and_kept_out_of_the_filter(sample_clip):
+    motion, _ = read_bvh(sample_clip)
+    auto = run(motion, load_preset("cartoon"))
+    assert auto.rest_frames == 4
+    assert np.allclose(auto.world_positions[:4], motion.world_positions()[:4])
+    keep = run(motion, resolve_config("cartoon", None, {"input": {"tpose": "keep"}}))
+    # With the T-pose filtered along, the jump rings into the frames after it.
+    ringing = np.abs(keep.world_positions[4:40] - auto.world_positions[4:40]).max()
+    assert ringing > 0.01 * motion.skeleton.height()
+    drop = run(motion, resolve_config("cartoon", None, {"input": {"tpose": "drop"}}))
+    assert drop.motion.num_frames == motion.num_frames - 4
+    assert np.allclose(drop.world_positions, auto.world_positions[4:])
+
+
+def test_same_input_same_bytes(sample_clip):
+    motion, _ = read_bvh(sample_clip)
+    first = format_bvh(run(motion, load_preset("looney")).motion)
+    second = format_bvh(run(read_bvh(sample_clip)[0], load_preset("looney")).motion)
+    assert first == second
+
+
+def test_library_entry_points(sample_clip, tmp_path):
+    from mocap_exaggerate import save_bvh
+
+    out = exaggerate(load_bvh(sample_clip), preset="subtle")
+    save_bvh(out, tmp_path / "x.bvh")
+    assert read_bvh(tmp_path / "x.bvh")[0].num_frames == out.num_frames
+    with pytest.raises(TypeError):
+        exaggerate(load_bvh(sample_clip), sigma=3)
+
+
+def test_presets_load_and_are_ordered_by_strength(sample_clip):
+    assert preset_names() == ["cartoon", "looney", "subtle"]
+    motion, _ = read_bvh(sample_clip)
+    stretch = {name: run(motion, load_preset(name)).max_link_stretch for name in preset_names()}
+    assert 1.0 < stretch["subtle"] < stretch["cartoon"] < stretch["looney"]
+
+
+def test_toml_round_trip_and_precedence():
+    config = resolve_config(
+        "looney",
+        '[extrapolate]\nomega = 3.0\nsigma = "12f"\n[extrapolate.weights]\nHips = 0.0\n',
+        {"extrapolate": {"omega": 2.5}, "correct": {"enabled": False}},
+    )
+    assert config.extrapolate.omega == 2.5  # flag beats file
+    assert config.extrapolate.sigma == "12f"  # file beats preset
+    assert config.correct.max_stretch == load_preset("looney").correct.max_stretch  # preset fills the rest
+    assert config.correct.enabled is False
+    assert config.extrapolate.weights == (("Hips", 0.0),)
+    again = PipelineConfig.from_toml(config.to_toml())
+    assert again == config
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("[extrapolat]\nomega = 2\n", "unknown block [extrapolat]"),
+        ("[extrapolate]\nomegaa = 2\n", "unknown key extrapolate.omegaa"),
+        ("[extrapolate]\nomega = 'x'\n", "extrapolate.omega"),
+        ("[correct]\ndelta = 0\n", "correct.delta"),
+        ("[input]\ntpose = 'sometimes'\n", "input.tpose"),
+        ("[extrapolate\n", "not valid TOML"),
+        ("[extrapolate.weights]\nHips = 'zero'\n", "weights"),
+    ],
+)
+def test_bad_config_names_file_and_key(text, words):
+    with pytest.raises(ConfigError) as caught:
+        resolve_config("cartoon", text, None, config_source="mine.toml")
+    assert str(caught.value).startswith("mine.toml: ")
+    assert words in str(caught.value)
+
+
+def test_unknown_preset():
+    with pytest.raises(ConfigError, match="unknown preset 'wild'.*cartoon"):
+        resolve_config("wild")
+
+
+def test_weights_by_joint_pattern_and_limb(sample_clip):
+    skeleton = read_bvh(sample_clip)[0].skeleton
+    weights = resolve_weights(skeleton, (("left_arm", 2.0), ("l*", 3.0), ("hip", 0.0), ("lHand", 5.0)))
+    index = skeleton.index
+    assert weights[index("hip")] == 0.0
+    assert weights[index("lHand")] == 5.0
+    assert weights[index("lIndex1")] == 3.0  # pattern after limb wins
+    assert weights[index("rShldr")] == 1.0
+    only_limb = resolve_weights(skeleton, (("left_arm", 2.0),))
+    arm = {index(n) for n in ("lShldr", "lForeArm", "lHand", "lIndex1", "lThumb2")}
+    assert set(np.flatnonzero(only_limb == 2.0)) >= arm
+    assert only_limb[index("lCollar")] == 1.0
+    with pytest.raises(ConfigError, match="no joint or limb matches 'Tail'"):
+        resolve_weights(skeleton, (("Tail", 1.0),))
+
+
+def test_weight_zero_keeps_a_joint_as_captured(sample_clip):
+    motion, _ = read_bvh(sample_clip)
+    config = resolve_config("cartoon", None, {"extrapolate": {"weights": {"hip": 0.0}}, "correct": {"enabled": False}})
+    result = run(motion, config)
+    assert np.allclose(result.world_positions[:, 0], motion.world_positions()[:, 0])
+
+
+HUMANOID_LIMBS = ["left_arm", "right_arm", "left_leg", "right_leg", "spine", "neck"]
+
+
+@pytest.mark.parametrize("path", shared_clip_params())
+def test_limbs_found_on_every_shared_clip(path):
+    motion = read_bvh(path)[0]
+    skeleton = motion.skeleton
+    limbs = find_limbs(skeleton)
+    assert list(limbs) == HUMANOID_LIMBS
+    # Rest poses are not reliable (Reallusion's has zero rotations meaning legs up), so look at
+    # the captured motion: over most frames a leg goes down from thigh to ankle, below the arms.
+    world = motion.world_positions()
+    up = skeleton.up_axis()
+    for side in ("left", "right"):
+        arm, leg = limbs[f"{side}_arm"], limbs[f"{side}_leg"]
+        assert np.median(world[:, leg.base, up] - world[:, leg.end, up]) > 0
+        assert np.median(world[:, arm.base, up] - world[:, leg.end, up]) > 0
+        assert np.median(world[:, limbs["neck"].end, up] - world[:, limbs["spine"].base, up]) > 0
+        # Where names carry a side, the limb found for that side carries it too.
+        for joint in arm.joints + leg.joints:
+            named = _side_from_name(skeleton.names[joint])
+            assert named in (None, side), skeleton.names[joint]
+
+
+def test_limb_names_on_a_cmu_skeleton():
+    skeleton = read_bvh(shared("cmu_16_01_jump_amc2bvh.bvh"))[0].skeleton
+    names = {k: [skeleton.names[j] for j in v.joints] for k, v in find_limbs(skeleton).items()}
+    assert names["left_arm"] == ["lhumerus", "lradius", "lwrist"]
+    assert names["right_leg"] == ["rfemur", "rtibia", "rfoot"]
+    assert names["neck"] == ["lowerneck", "upperneck", "head"]
