@@ -285,7 +285,7 @@ def run(motion: Motion, config: PipelineConfig | None = None) -> PipelineResult:
         notes.append(f"dropped {rest} leading rest-pose frame(s)")
     elif rest:
         notes.append(f"kept {rest} leading rest-pose frame(s) out of the filters, unchanged")
-    world = motion.world_positions()
+    world_rot, world = motion.forward_kinematics()
     timings["forward_kinematics"] = time.perf_counter() - start
 
     first = 0 if dropped else rest
@@ -322,7 +322,7 @@ def run(motion: Motion, config: PipelineConfig | None = None) -> PipelineResult:
     start = time.perf_counter()
     positions = world.copy()
     positions[first:] = body
-    out = positions_to_motion(positions, motion)
+    out = positions_to_motion(positions, motion, world_rot)
     timings["orient"] = time.perf_counter() - start
 
     lengths = skeleton.link_lengths()

@@ -212,3 +212,16 @@ def test_writer_refuses_nan(sample_clip):
     positions[3, 0, 1] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         format_bvh(motion.replace(local_positions=positions))
+
+
+@pytest.mark.parametrize("decimals", [1, 4, 6])
+@pytest.mark.parametrize("scale", [1e-4, 1.0, 300.0, 5e8])
+def test_fast_number_formatting_equals_printf(decimals, scale):
+    from mocap_exaggerate.io.bvh import format_fixed
+
+    rng = np.random.default_rng(int(scale * 10) % 1000 + decimals)
+    values = rng.normal(scale=scale, size=(40, 7))
+    values[0] = [0.0, -0.0, -1e-12, 9.99999996, -99.99999996, 123456.5, 1e-3]
+    expected_row = " ".join([f"%.{decimals}f"] * 7) + "\n"
+    expected = (expected_row * 40) % tuple((np.round(values, decimals) + 0.0).ravel().tolist())
+    assert format_fixed(values, decimals) == expected.encode()

@@ -29,7 +29,7 @@ from ..rotations import quat_from_euler, quat_to_euler
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .files import atomic_write
 
-__all__ = ["BVHReport", "read_bvh", "load_bvh", "save_bvh", "format_bvh"]
+__all__ = ["BVHReport", "read_bvh", "load_bvh", "save_bvh", "format_bvh", "format_fixed", "motion_channels"]
 
 log = logging.getLogger(__name__)
 
@@ -531,6 +531,70 @@ def _format_header(motion: Motion) -> str:
 
 
 _BLOCK_FRAMES = 2048
+#: Beyond this magnitude micro-units no longer fit float64 exactly; such rows use Python's formatting.
+_FAST_LIMIT = 1e9
+
+
+def format_fixed(values: np.ndarray, decimals: int = 6) -> bytes:
+    """Rows of numbers as text: fixed point, space-separated, one line per row.
+
+    Digits are computed with integer arithmetic over the whole array and the
+    characters gathered with a mask, so the cost is a few NumPy passes rather
+    than one Python format call per number (twice as fast as ``%`` formatting;
+    a sub-joint skeleton has four times the channels). Values are rounded to
+    ``decimals`` places, and zero is never written with a minus sign.
+
+    values : (F, C) float64, finite
+    """
+    values = np.asarray(values, dtype=np.float64)
+    rows, cols = values.shape
+    if rows == 0:
+        return b""
+    if cols == 0:
+        return b"\n" * rows
+    if np.max(np.abs(values)) >= _FAST_LIMIT:
+        row = " ".join([f"%.{decimals}f"] * cols) + "\n"
+        return ((row * rows) % tuple((np.round(values, decimals) + 0.0).ravel().tolist())).encode("ascii")
+    scale = 10**decimals
+    flat = values.ravel()
+    units = np.rint(np.abs(flat) * scale).astype(np.int64)
+    negative = (flat < 0) & (units > 0)
+    whole, frac = np.divmod(units, scale)
+    whole = whole.astype(np.int32)
+    frac = frac.astype(np.int32) * 10 ** (decimals % 2)  # padded to an even digit count
+    int_width = len(str(int(whole.max())))
+    int_width += int_width % 2
+    frac_width = decimals + decimals % 2
+    # One record per value, every digit pair at an even offset so it is one uint16 store:
+    # separator, sign, integer digits, '.', (dropped pad), decimals.
+    point = 2 + int_width
+    chars = np.empty((units.size, 4 + int_width + frac_width), dtype=np.uint8)
+    chars[:, 0] = ord(" ")
+    chars.reshape(rows, cols, -1)[:, 0, 0] = ord("\n")
+    chars[:, 1] = ord("-")
+    chars[:, point] = ord(".")
+    pairs = chars.view(np.uint16)
+    rest = whole
+    for column in range(point - 2, 1, -2):
+        rest, pair = np.divmod(rest, 100)
+        pairs[:, column // 2] = _PAIRS[pair]
+    rest = frac
+    for column in range(chars.shape[1] - 2, point + 1, -2):
+        rest, pair = np.divmod(rest, 100)
+        pairs[:, column // 2] = _PAIRS[pair]
+    keep = np.ones(chars.shape, dtype=bool)
+    keep[0, 0] = False
+    keep[:, 1] = negative
+    keep[:, point + 1] = False
+    keep[:, point + 2 + decimals :] = False
+    # Leading zeros of the integer part go, but one digit always stays.
+    for k in range(int_width - 1):
+        keep[:, 2 + k] = whole >= 10 ** (int_width - 1 - k)
+    return chars[keep].tobytes() + b"\n"
+
+
+# Two ASCII digits per number 0..99, as the uint16 whose bytes they are in memory.
+_PAIRS = np.array([[48 + i // 10, 48 + i % 10] for i in range(100)], dtype=np.uint8).view(np.uint16).ravel()
 
 
 def format_bvh(motion: Motion) -> bytes:
@@ -538,22 +602,11 @@ def format_bvh(motion: Motion) -> bytes:
     values = motion_channels(motion)
     if not np.all(np.isfinite(values)):
         raise ValueError("motion has NaN or infinite values; refusing to write them")
-    # Fixed point with six decimals; "-0.000000" is written as "0.000000".
-    values = np.round(values, 6) + 0.0
-    parts = [_format_header(motion).encode("ascii", errors="strict") if _is_ascii(motion) else _format_header(motion).encode("utf-8")]
-    channels = values.shape[1]
-    if channels:
-        row = " ".join(["%.6f"] * channels) + "\n"
-        for start in range(0, len(values), _BLOCK_FRAMES):
-            block = values[start : start + _BLOCK_FRAMES]
-            parts.append(((row * len(block)) % tuple(block.ravel().tolist())).encode("ascii"))
-    else:
-        parts.append(b"\n" * len(values))
+    header = _format_header(motion).encode("utf-8")
+    parts = [header]
+    for start in range(0, max(len(values), 1), _BLOCK_FRAMES):
+        parts.append(format_fixed(values[start : start + _BLOCK_FRAMES]))
     return b"".join(parts)
-
-
-def _is_ascii(motion: Motion) -> bool:
-    return all(name.isascii() for name in motion.skeleton.names)
 
 
 def save_bvh(motion: Motion, path: str | os.PathLike | BinaryIO, *, overwrite: bool = True) -> None:

@@ -16,18 +16,20 @@ from ..rotations import quat_inv, quat_rotate
 __all__ = ["positions_to_motion"]
 
 
-def positions_to_motion(world_pos: np.ndarray, source: Motion) -> Motion:
+def positions_to_motion(world_pos: np.ndarray, source: Motion, world_rot: np.ndarray | None = None) -> Motion:
     """A 6-channel Motion on the source skeleton whose joints sit at ``world_pos``.
 
     world_pos : (F, J, 3) float64 target world positions, same F and J as ``source``
     source : the captured Motion; its local rotations are kept
+    world_rot : (F, J, 4) float64, the source's world rotations if already computed
     """
     world_pos = np.asarray(world_pos, dtype=np.float64)
     expected = source.local_positions.shape
     if world_pos.shape != expected:
         raise ValueError(f"positions must be {expected}, got {world_pos.shape}")
     parents = source.skeleton.parents
-    world_rot = source.world_rotations()
+    if world_rot is None:
+        world_rot = source.world_rotations()
     local_pos = np.empty_like(world_pos)
     local_pos[:, 0] = world_pos[:, 0]
     link = world_pos[:, 1:] - world_pos[:, parents[1:]]

@@ -1,0 +1,98 @@
+"""Throughput of read / stages / write, against bvhio's read of the same file.
+
+Prints figures for the longest shared clip and for a 10k-frame clip made by
+tiling it. Not a test: run it by hand (python bench/throughput.py) and quote
+the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
+from mocap_exaggerate.pipeline import load_preset, run
+
+ROOT = Path(__file__).resolve().parent.parent
+SHARED = ROOT.parent / "shared" / "data" / "bvh"
+
+
+def longest_clip() -> Path:
+    clips = sorted(SHARED.glob("*.bvh")) or sorted((ROOT / "sample_data").glob("*.bvh"))
+    return max(clips, key=lambda p: read_bvh(p)[0].num_frames)
+
+
+def tiled(path: Path, frames: int, folder: Path) -> Path:
+    """The clip's motion lines repeated until ``frames`` lines, as a new BVH file."""
+    data = path.read_bytes()
+    motion, _ = read_bvh(data)
+    head, _, body = data.partition(b"MOTION")
+    lines = [l for l in body.splitlines()[3:] if l.strip()][: motion.num_frames]
+    rows = (lines * (frames // len(lines) + 1))[:frames]
+    frame_time = np.format_float_positional(motion.frame_time, trim="-")
+    out = folder / f"tiled_{frames}.bvh"
+    out.write_bytes(head + f"MOTION\nFrames: {frames}\nFrame Time: {frame_time}\n".encode() + b"\n".join(rows) + b"\n")
+    return out
+
+
+def best_of(func, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        func()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def measure(path: Path, preset: str, repeat: int, with_bvhio: bool) -> None:
+    motion, _ = read_bvh(path)
+    frames, joints = motion.num_frames, motion.skeleton.num_joints
+    config = load_preset(preset)
+    t_read = best_of(lambda: read_bvh(path), repeat)
+    result = run(motion, config)
+    t_stages = best_of(lambda: run(motion, config), repeat)
+    t_write = best_of(lambda: format_bvh(result.motion), repeat)
+    with tempfile.TemporaryDirectory() as tmp:
+        command = [sys.executable, "-m", "cli.main", "-q", "exaggerate", str(path), "-o", tmp, "--overwrite",
+                   "--preset", preset]
+        t_command = best_of(lambda: subprocess.run(command, check=True, cwd=ROOT), repeat)
+    print(f"{path.name}: {frames} frames, {joints} joints, preset {preset}")
+    print(f"  read      {t_read * 1e3:8.1f} ms  {frames / t_read:10.0f} frames/s")
+    for name, seconds in result.timings.items():
+        print(f"    {name:<18}{seconds * 1e3:8.1f} ms")
+    print(f"  stages    {t_stages * 1e3:8.1f} ms  {frames / t_stages:10.0f} frames/s  "
+          f"({t_stages / frames * 1e3:.4f} ms per frame)")
+    print(f"  write     {t_write * 1e3:8.1f} ms  {frames / t_write:10.0f} frames/s")
+    print(f"  in memory {(t_read + t_stages + t_write) * 1e3:8.1f} ms (read + stages + write)")
+    print(f"  command   {t_command * 1e3:8.1f} ms  (mocap-exaggerate exaggerate, new process, imports included)")
+    if with_bvhio:
+        import bvhio
+
+        start = time.perf_counter()
+        bvhio.readAsHierarchy(str(path))
+        t_bvhio = time.perf_counter() - start
+        print(f"  bvhio readAsHierarchy {t_bvhio * 1e3:8.1f} ms: our read is {t_bvhio / t_read:.0f}x faster; "
+              f"the whole command takes {t_command / t_bvhio:.3f} of bvhio's read (target <= 0.1)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--preset", default="cartoon")
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--frames", type=int, default=10_000, help="length of the tiled clip")
+    parser.add_argument("--no-bvhio", action="store_true", help="skip bvhio (slow: ~25 s on 10k frames)")
+    args = parser.parse_args()
+    clip = longest_clip()
+    measure(clip, args.preset, args.repeat, not args.no_bvhio)
+    with tempfile.TemporaryDirectory() as tmp:
+        measure(tiled(clip, args.frames, Path(tmp)), args.preset, args.repeat, not args.no_bvhio)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,189 @@
+"""The command line through click's CliRunner: exit codes, messages, files written."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cli.main import cli
+from mocap_exaggerate.io.bvh import read_bvh
+
+from .test_bvh import MALFORMED
+
+
+@pytest.fixture
+def runner():
+    return CliRunner()
+
+
+def test_exaggerate_writes_bvh_and_manifest(runner, sample_clip, tmp_path):
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path), "--sigma", "0.2s", "--omega", "5"])
+    assert result.exit_code == 0, result.output
+    bvh = tmp_path / "cmu_09_01_run_daz.bvh"
+    info = json.loads((tmp_path / "cmu_09_01_run_daz.json").read_text())
+    assert read_bvh(bvh)[0].num_frames == 149
+    assert info["input"]["hash"].startswith("sha256:")
+    assert info["config"]["extrapolate"]["omega"] == 5.0
+    assert info["config"]["extrapolate"]["sigma"] == "0.2s"
+    assert info["preset"] == "cartoon"
+    assert info["version"]
+    assert set(info["timings"]) >= {"read", "extrapolate", "correct", "write"}
+    assert info["rest_frames"] == {"count": 4, "dropped": False}
+    assert "wrote" in result.stderr
+
+
+def test_outputs_are_deterministic(runner, sample_clip, tmp_path):
+    for folder in ("a", "b"):
+        assert runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / folder)]).exit_code == 0
+    assert (tmp_path / "a" / "cmu_09_01_run_daz.bvh").read_bytes() == (tmp_path / "b" / "cmu_09_01_run_daz.bvh").read_bytes()
+    a = json.loads((tmp_path / "a" / "cmu_09_01_run_daz.json").read_text())
+    b = json.loads((tmp_path / "b" / "cmu_09_01_run_daz.json").read_text())
+    a.pop("timings"), b.pop("timings")
+    assert a == b
+
+
+def test_refuses_to_overwrite_then_overwrites(runner, sample_clip, tmp_path):
+    args = ["exaggerate", str(sample_clip), "-o", str(tmp_path)]
+    assert runner.invoke(cli, args).exit_code == 0
+    again = runner.invoke(cli, args)
+    assert again.exit_code == 2
+    assert "exists; pass --overwrite" in again.stderr
+    assert runner.invoke(cli, args + ["--overwrite", "--omega", "2"]).exit_code == 0
+    info = json.loads((tmp_path / "cmu_09_01_run_daz.json").read_text())
+    assert info["config"]["extrapolate"]["omega"] == 2.0
+
+
+def test_never_overwrites_its_input(runner, sample_clip, tmp_path):
+    clip = tmp_path / "walk.bvh"
+    shutil.copy(sample_clip, clip)
+    before = clip.read_bytes()
+    result = runner.invoke(cli, ["exaggerate", str(clip), "-o", str(tmp_path), "--overwrite"])
+    assert result.exit_code == 2
+    assert "would overwrite the input" in result.stderr
+    assert clip.read_bytes() == before
+
+
+def test_stdin_to_stdout(runner, sample_clip):
+    result = runner.invoke(cli, ["exaggerate", "-", "-o", "-", "--preset", "subtle"], input=sample_clip.read_bytes())
+    assert result.exit_code == 0, result.stderr
+    motion, _ = read_bvh(result.stdout_bytes)
+    assert motion.num_frames == 149
+    assert all(len(c) == 6 for c in motion.skeleton.channels)
+
+
+def test_stdin_to_folder_uses_name(runner, sample_clip, tmp_path):
+    result = runner.invoke(cli, ["exaggerate", "-", "-o", str(tmp_path), "--name", "take1"], input=sample_clip.read_bytes())
+    assert result.exit_code == 0, result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["take1.bvh", "take1.json"]
+
+
+@pytest.mark.parametrize("name", sorted(MALFORMED))
+def test_malformed_input_exit_2_one_line_no_output(runner, tmp_path, name):
+    data, line, _ = MALFORMED[name]
+    clip = tmp_path / "bad.bvh"
+    clip.write_bytes(data)
+    out = tmp_path / "out"
+    result = runner.invoke(cli, ["exaggerate", str(clip), "-o", str(out)])
+    assert result.exit_code == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert f"bad.bvh:{line}:" in lines[0]
+    assert "Traceback" not in result.output
+    assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--omega", "99"], "extrapolate.omega"),
+        (["--sigma", "fast"], "sigma"),
+        (["--delta", "0"], "correct.delta"),
+        (["--weight", "Hips"], "NAME=WEIGHT"),
+        (["--weight", "Tail=2"], "no joint or limb matches 'Tail'"),
+        (["--preset", "wild"], "unknown preset"),
+        (["--tpose", "maybe"], "maybe"),
+        (["--config", "missing.toml"], "missing.toml"),
+    ],
+)
+def test_bad_options_exit_2_naming_them(runner, sample_clip, tmp_path, args, words):
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "o"), *args])
+    assert result.exit_code == 2, result.output
+    assert words in result.stderr
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "o").exists()
+
+
+def test_config_file_and_flags(runner, sample_clip, tmp_path):
+    config = tmp_path / "p.toml"
+    config.write_text('[extrapolate]\nomega = 3.0\n[extrapolate.weights]\nleft_arm = 2.0\n[correct]\nenabled = false\n')
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path), "--config", str(config), "--omega", "4"])
+    assert result.exit_code == 0, result.stderr
+    info = json.loads((tmp_path / "cmu_09_01_run_daz.json").read_text())
+    assert info["config"]["extrapolate"]["omega"] == 4.0
+    assert info["config"]["extrapolate"]["weights"] == {"left_arm": 2.0}
+    assert info["stages"] == ["extrapolate"]
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[correct]\ndelta = 2\n")
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "x"), "--config", str(bad)])
+    assert result.exit_code == 2
+    assert "bad.toml: correct.delta" in result.stderr
+
+
+def test_missing_input_and_folder_input(runner, tmp_path):
+    result = runner.invoke(cli, ["exaggerate", str(tmp_path / "nope.bvh"), "-o", str(tmp_path)])
+    assert result.exit_code == 2 and "no such file" in result.stderr
+    result = runner.invoke(cli, ["exaggerate", str(tmp_path), "-o", str(tmp_path / "o")])
+    assert result.exit_code == 2 and "is a folder" in result.stderr
+
+
+def test_info(runner, sample_clip):
+    result = runner.invoke(cli, ["info", str(sample_clip), "--limbs"])
+    assert result.exit_code == 0, result.output
+    for words in ["43 (+14 End Sites)", "ZXY x42", "149 at 120 fps", "1.233 s", "along Y", "4 leading", "lShldr > lForeArm > lHand"]:
+        assert words in result.output
+    data = json.loads(runner.invoke(cli, ["info", str(sample_clip), "--json"]).output)
+    assert data["frames"] == 149 and data["joints"] == 43 and data["rotation_orders"] == {"ZYX": 1, "ZXY": 42}
+
+
+def test_info_fps_override(runner):
+    from .helpers import shared
+
+    clip = shared("cmu_16_01_jump_amc2bvh.bvh")
+    result = runner.invoke(cli, ["info", str(clip), "--fps", "120", "--json"])
+    data = json.loads(result.output)
+    assert data["fps"] == 120.0
+    assert data["duration_s"] == pytest.approx(321 / 120)
+
+
+def test_presets_command(runner):
+    result = runner.invoke(cli, ["presets"])
+    assert result.exit_code == 0
+    assert "cartoon (default):" in result.output and "looney:" in result.output and "subtle:" in result.output
+
+
+@pytest.mark.parametrize("command", [[], ["exaggerate"], ["info"], ["presets"]])
+def test_help_shows_an_example(runner, command):
+    result = runner.invoke(cli, [*command, "--help"])
+    assert result.exit_code == 0
+    assert "Example" in result.output
+
+
+def test_quiet_and_verbose(runner, sample_clip, tmp_path):
+    quiet = runner.invoke(cli, ["-q", "exaggerate", str(sample_clip), "-o", str(tmp_path / "q")])
+    assert quiet.exit_code == 0 and quiet.stderr == ""
+    verbose = runner.invoke(cli, ["-v", "exaggerate", str(sample_clip), "-o", str(tmp_path / "v")])
+    assert "rest-pose" in verbose.stderr
+
+
+def test_fps_flag_changes_sigma_in_frames(runner, tmp_path):
+    from .helpers import shared
+
+    clip = shared("cmu_16_01_jump_amc2bvh.bvh")
+    assert runner.invoke(cli, ["exaggerate", str(clip), "-o", str(tmp_path / "a")]).exit_code == 0
+    assert runner.invoke(cli, ["exaggerate", str(clip), "-o", str(tmp_path / "b"), "--fps", "120"]).exit_code == 0
+    a, _ = read_bvh(tmp_path / "a" / clip.name)
+    b, _ = read_bvh(tmp_path / "b" / clip.name)
+    assert b.frame_time == pytest.approx(1 / 120)
+    assert not np.allclose(a.world_positions(), b.world_positions())
