@@ -29,6 +29,7 @@ from mocap_exaggerate.pipeline import (
     resolve_config,
     run,
 )
+from mocap_exaggerate.stages.subjoints import build_hierarchy
 from mocap_exaggerate.stages.tpose import detect_rest_frames
 
 log = logging.getLogger("mocap_exaggerate")
@@ -98,6 +99,21 @@ def pipeline_options(func: Callable) -> Callable:
                      help="Correction: stretch up to this factor of a link's length is free."),
         click.option("--max-iter", type=int, default=None, help="Correction: iteration bound."),
         click.option("--correct/--no-correct", "correct_on", default=None, help="Switch link correction on or off."),
+        click.option("--subjoints", "per_link", type=int, default=None, metavar="M",
+                     help="Cut every link into M rubber sub-links (default from the preset, 4 in cartoon)."),
+        click.option("--sublink-length", default=None, metavar="LEN",
+                     help="Instead of M: target sub-link length, in skeleton units or as '3%' of the height."),
+        click.option("--no-subjoints", "subjoints_off", is_flag=True, default=False,
+                     help="Switch the rubber sub-joint hierarchy (Bézier groups) off."),
+        click.option("--stiffness", type=float, default=None,
+                     help="Follow-through spring to the motion, 1/s^2: (2 pi f)^2 wobbles at f Hz (158 = 2 Hz)."),
+        click.option("--link-stiffness", type=float, default=None, help="Springs between neighbouring sub-joints, 1/s^2."),
+        click.option("--damping", type=float, default=None, help="Drag on the follow-through, 1/s; higher settles sooner."),
+        click.option("--blend", type=float, default=None,
+                     help="Share of the simulated follow-through in the result, 0 (none) to 1."),
+        click.option("--springs/--no-springs", "springs_on", default=None, help="Switch the follow-through on or off."),
+        click.option("--skeleton", "skeleton_mode", type=click.Choice(["sub", "original"]), default=None,
+                     help="Write the rubber sub-joint skeleton (sub) or the original joints only (original)."),
         click.option("--tpose", type=click.Choice(["auto", "keep", "drop"]), default=None,
                      help="Leading synthetic rest pose: auto (keep out of filters, unchanged), keep, drop."),
         click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time."),
@@ -108,7 +124,9 @@ def pipeline_options(func: Callable) -> Callable:
 
 
 def _overrides(p: dict[str, Any]) -> dict[str, Any]:
-    table: dict[str, dict[str, Any]] = {"input": {}, "extrapolate": {}, "correct": {}}
+    table: dict[str, dict[str, Any]] = {
+        "input": {}, "extrapolate": {}, "correct": {}, "subjoints": {}, "springs": {}, "output": {}
+    }
     pairs = [
         ("input", "tpose", p["tpose"]), ("input", "fps", p["fps"]),
         ("extrapolate", "enabled", p["extrapolate_on"]), ("extrapolate", "sigma", p["sigma"]),
@@ -116,6 +134,12 @@ def _overrides(p: dict[str, Any]) -> dict[str, Any]:
         ("correct", "enabled", p["correct_on"]), ("correct", "threshold", p["threshold"]),
         ("correct", "delta", p["delta"]), ("correct", "max_stretch", p["max_stretch"]),
         ("correct", "max_iter", p["max_iter"]),
+        ("subjoints", "enabled", False if p["subjoints_off"] else None), ("subjoints", "per_link", p["per_link"]),
+        ("subjoints", "sublink_length", _length(p["sublink_length"])),
+        ("springs", "enabled", p["springs_on"]), ("springs", "stiffness", p["stiffness"]),
+        ("springs", "link_stiffness", p["link_stiffness"]), ("springs", "damping", p["damping"]),
+        ("springs", "blend", p["blend"]),
+        ("output", "skeleton", p["skeleton_mode"]),
     ]
     for block, key, value in pairs:
         if value is not None:
@@ -123,6 +147,16 @@ def _overrides(p: dict[str, Any]) -> dict[str, Any]:
     if p["weights"]:
         table["extrapolate"]["weights"] = dict(p["weights"])
     return {k: v for k, v in table.items() if v}
+
+
+def _length(value: str | None) -> float | str | None:
+    """A --sublink-length value: a number of skeleton units, or a share such as '3%'."""
+    if value is None or value.strip().endswith("%"):
+        return value
+    try:
+        return float(value)
+    except ValueError:
+        return value  # the config names it in its error
 
 
 def _config_from_options(p: dict[str, Any]):
@@ -172,6 +206,8 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
       mocap-exaggerate exaggerate walk.bvh -o out/                       # cartoon preset
       mocap-exaggerate exaggerate walk.bvh -o out/ --preset looney --weight Hips=0
       mocap-exaggerate exaggerate walk.bvh -o out/ --sigma 18f --omega 3 --no-correct
+      mocap-exaggerate exaggerate walk.bvh -o out/ --subjoints 6 --blend 0.7 --stiffness 100
+      mocap-exaggerate exaggerate walk.bvh -o out/ --skeleton original   # original joint set
       cat walk.bvh | mocap-exaggerate exaggerate - -o - > walk_cartoon.bvh
     """
     preset, config = _config_from_options(options)
@@ -251,15 +287,16 @@ def _quiet() -> bool:
 @cli.command()
 @click.argument("input_path", metavar="IN.bvh", type=click.Path(path_type=Path, allow_dash=True))
 @click.option("--limbs", is_flag=True, help="Also list the limbs found (base to end effector).")
+@click.option("--groups", is_flag=True, help="Also list the rubber-joint groups and the joints that ride rigidly.")
 @click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
 @_fail_cleanly
-def info(input_path: Path, limbs: bool, fps: float | None, as_json: bool) -> None:
+def info(input_path: Path, limbs: bool, groups: bool, fps: float | None, as_json: bool) -> None:
     """Describe a clip: joints, channels, rotation orders, frames, fps, duration, height.
 
     \b
     Example:
-      mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs
+      mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs --groups
     """
     label = "<stdin>" if str(input_path) == "-" else str(input_path)
     motion, report = read_bvh(input_path, name=label, fps=fps)
@@ -286,6 +323,11 @@ def info(input_path: Path, limbs: bool, fps: float | None, as_json: bool) -> Non
     }
     if limbs:
         data["limbs"] = {name: [skeleton.names[j] for j in limb.joints] for name, limb in find_limbs(skeleton).items()}
+    if groups:
+        hierarchy = build_hierarchy(skeleton)
+        data["groups"] = [[skeleton.names[j] for j in chain] for chain in hierarchy.groups]
+        data["rigid"] = [skeleton.names[j] for j in np.flatnonzero(hierarchy.rigid)]
+        data["subjoints"] = hierarchy.skeleton.num_joints
     if as_json:
         click.echo(json.dumps(data, indent=2))
         return
@@ -302,6 +344,14 @@ def info(input_path: Path, limbs: bool, fps: float | None, as_json: bool) -> Non
     if limbs:
         for name, chain in data["limbs"].items():
             click.echo(f"  {name:<11} {' > '.join(chain)}")
+    if groups:
+        click.echo(f"  sub-joints  {data['subjoints']} with the default 4 sub-links per link")
+        for chain in data["groups"]:
+            click.echo(f"  group       {chain[0]} | {' > '.join(chain[1:])}")
+        rigid = data["rigid"]
+        if rigid:
+            shown = ", ".join(rigid[:8]) + (f", ... ({len(rigid)} in all)" if len(rigid) > 8 else "")
+            click.echo(f"  rigid       {shown}")
 
 
 @cli.command()

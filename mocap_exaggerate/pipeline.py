@@ -26,7 +26,9 @@ from .motion import Motion
 from .skeleton import Skeleton
 from .stages.correct import CorrectConfig, CorrectReport, correct
 from .stages.extrapolate import ExtrapolateConfig, extrapolate
-from .stages.orient import positions_to_motion
+from .stages.orient import motion_from_world, recover_orientations
+from .stages.springs import SpringConfig, simulate_springs, spring_substeps
+from .stages.subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints
 from .stages.tpose import detect_rest_frames
 
 __all__ = [
@@ -48,8 +50,9 @@ log = logging.getLogger(__name__)
 
 DEFAULT_PRESET = "cartoon"
 #: Blocks in the order they run.
-STAGES = ("extrapolate", "correct")
+STAGES = ("extrapolate", "correct", "subjoints", "springs")
 _TPOSE_MODES = ("auto", "keep", "drop")
+_SKELETON_MODES = ("sub", "original")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -74,7 +77,30 @@ class InputConfig:
             raise ConfigError(f"input.fps must be a positive frame rate, got {self.fps!r}")
 
 
-_BLOCKS = {"input": InputConfig, "extrapolate": ExtrapolateConfig, "correct": CorrectConfig}
+@dataclass(frozen=True, kw_only=True)
+class OutputConfig:
+    """What is written.
+
+    skeleton : ``sub`` writes the rubber sub-joint hierarchy; ``original``
+        the original joints only (6 channels each), for pipelines that need
+        the original joint set.
+    """
+
+    skeleton: str = "sub"
+
+    def __post_init__(self) -> None:
+        if self.skeleton not in _SKELETON_MODES:
+            raise ConfigError(f"output.skeleton must be one of {', '.join(_SKELETON_MODES)}, got {self.skeleton!r}")
+
+
+_BLOCKS = {
+    "input": InputConfig,
+    "extrapolate": ExtrapolateConfig,
+    "correct": CorrectConfig,
+    "subjoints": SubjointConfig,
+    "springs": SpringConfig,
+    "output": OutputConfig,
+}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -84,6 +110,9 @@ class PipelineConfig:
     input: InputConfig = field(default_factory=InputConfig)
     extrapolate: ExtrapolateConfig = field(default_factory=ExtrapolateConfig)
     correct: CorrectConfig = field(default_factory=CorrectConfig)
+    subjoints: SubjointConfig = field(default_factory=SubjointConfig)
+    springs: SpringConfig = field(default_factory=SpringConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
     description: str = ""
 
     @classmethod
@@ -111,8 +140,12 @@ class PipelineConfig:
                 values[name] = item
             if key == "extrapolate" and "weights" in values:
                 values["weights"] = _weights_from_table(values["weights"], source)
-            if key == "correct" and isinstance(values.get("max_iter"), float) and values["max_iter"].is_integer():
-                values["max_iter"] = int(values["max_iter"])
+            for integer in ("max_iter", "per_link"):
+                if isinstance(values.get(integer), float) and values[integer].is_integer():
+                    values[integer] = int(values[integer])
+            for listed in ("groups", "rigid"):
+                if listed in values and not isinstance(values[listed], (list, tuple)):
+                    raise ConfigError(f"{source}: {key}.{listed} must be a list")
             try:
                 blocks[key] = block_type(**values)
             except ConfigError as error:
@@ -133,6 +166,9 @@ class PipelineConfig:
             table = asdict(getattr(self, name))
             if name == "extrapolate":
                 table["weights"] = {pattern: float(w) for pattern, w in self.extrapolate.weights}
+            if name == "subjoints":
+                table["groups"] = [list(g) for g in self.subjoints.groups]
+                table["rigid"] = list(self.subjoints.rigid)
             out[name] = {k: v for k, v in table.items() if v is not None}
         return out
 
@@ -255,7 +291,10 @@ class PipelineResult:
     """A run's output and what happened on the way.
 
     motion : the output Motion (6 channels on every joint)
-    world_positions : (F, J, 3) float64 positions the output's FK reproduces
+    world_positions : (F, J_out, 3) float64 positions the output's FK reproduces
+    world_rotations : (F, J_out, 4) float64 orientations it reproduces
+    original_index : (J,) int, where each original joint is in the output skeleton
+    hierarchy : the sub-joint hierarchy (None when sub-joints were off)
     rest_frames : leading synthetic rest frames kept out of the filters
     timings : seconds per block, in run order
     correct_report : CorrectReport or None when correction was off
@@ -263,11 +302,15 @@ class PipelineResult:
 
     motion: Motion
     world_positions: np.ndarray
+    world_rotations: np.ndarray
+    original_index: np.ndarray
+    hierarchy: SubjointHierarchy | None
     rest_frames: int
     rest_frames_dropped: bool
     timings: dict[str, float]
     correct_report: CorrectReport | None = None
     max_link_stretch: float = 1.0
+    substeps: int = 0
     notes: list[str] = field(default_factory=list)
 
 
@@ -319,20 +362,65 @@ def run(motion: Motion, config: PipelineConfig | None = None) -> PipelineResult:
             notes.append(f"correction stopped at max_iter with {report.unconverged_frames} frame(s) above threshold")
         timings["correct"] = time.perf_counter() - start
 
-    start = time.perf_counter()
     positions = world.copy()
     positions[first:] = body
-    out = positions_to_motion(positions, motion, world_rot)
+    lengths = skeleton.link_lengths()
+    stretch = _max_link_stretch(positions, skeleton.parents, lengths)
+
+    start = time.perf_counter()
+    sub_config = config.subjoints if config.subjoints.enabled else SubjointConfig(per_link=1, groups=(), rigid=())
+    hierarchy = build_hierarchy(skeleton, sub_config)
+    if not config.subjoints.enabled:
+        hierarchy = SubjointHierarchy(hierarchy.skeleton, hierarchy.original, hierarchy.link_child,
+                                      hierarchy.link_parent, hierarchy.fraction, hierarchy.rigid, ())
+    sub_pos = position_subjoints(positions, hierarchy, lengths)
+    timings["subjoints"] = time.perf_counter() - start
+
+    substeps = 0
+    if config.springs.enabled and config.springs.blend > 0:
+        start = time.perf_counter()
+        active = ~hierarchy.rigid[hierarchy.link_child]
+        substeps = spring_substeps(hierarchy.skeleton.parents, motion.frame_time, config.springs, active)
+        sub_pos[first:] = simulate_springs(
+            sub_pos[first:],
+            hierarchy.skeleton.parents,
+            motion.frame_time,
+            stiffness=config.springs.stiffness,
+            link_stiffness=config.springs.link_stiffness,
+            damping=config.springs.damping,
+            blend=config.springs.blend,
+            active=active,
+        )
+        timings["springs"] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    sub_rot, sub_pos = recover_orientations(sub_pos, hierarchy, motion, world_rot, world)
+    if config.output.skeleton == "original":
+        keep = hierarchy.original
+        out_pos, out_rot = sub_pos[:, keep], sub_rot[:, keep]
+        out = motion_from_world(out_pos, out_rot, skeleton.with_full_channels(), motion.frame_time,
+                                motion.euler_hint)
+        original_index = np.arange(skeleton.num_joints)
+    else:
+        out_pos, out_rot = sub_pos, sub_rot
+        out = motion_from_world(out_pos, out_rot, hierarchy.skeleton, motion.frame_time)
+        original_index = hierarchy.original
     timings["orient"] = time.perf_counter() - start
 
-    lengths = skeleton.link_lengths()
+    return PipelineResult(
+        out, out_pos, out_rot, original_index, hierarchy if config.subjoints.enabled else None,
+        rest, dropped, timings, report, stretch, substeps, notes,
+    )
+
+
+def _max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.ndarray) -> float:
+    """Largest ratio of current to rest length over links longer than 1e-9 of the longest."""
     long_links = lengths > 1e-9 * max(lengths.max(), 1e-12)
     long_links[0] = False
-    stretch = 1.0
-    if long_links.any():
-        current = np.linalg.norm(positions[:, long_links] - positions[:, skeleton.parents[long_links]], axis=-1)
-        stretch = float((current / lengths[long_links]).max())
-    return PipelineResult(out, positions, rest, dropped, timings, report, stretch, notes)
+    if not long_links.any():
+        return 1.0
+    current = np.linalg.norm(positions[:, long_links] - positions[:, parents[long_links]], axis=-1)
+    return float((current / lengths[long_links]).max())
 
 
 def exaggerate(motion: Motion, config: PipelineConfig | None = None, **preset: Any) -> Motion:
@@ -377,17 +465,24 @@ def manifest(
         "input": {"file": input_name, "hash": file_digest(input_bytes), "frames": frames_in, "fps": fps},
         "preset": preset,
         "config": config.to_dict(),
-        "stages": [s for s in STAGES if getattr(config, s).enabled],
+        "stages": [s for s in STAGES if getattr(config, s).enabled and not (s == "springs" and config.springs.blend == 0)],
         "rest_frames": {"count": result.rest_frames, "dropped": result.rest_frames_dropped},
         "outputs": outputs,
         "result": {
             "frames": result.motion.num_frames,
             "joints": result.motion.skeleton.num_joints,
             "max_link_stretch": round(result.max_link_stretch, 6),
+            "skeleton": config.output.skeleton,
         },
         "warnings": list(reader_warnings) + list(result.notes),
         "timings": {"read": read_seconds, **result.timings, "write": write_seconds},
     }
+    if result.hierarchy is not None:
+        names = result.hierarchy.skeleton.names
+        info["result"]["subjoints"] = result.hierarchy.skeleton.num_joints
+        info["result"]["groups"] = [[names[result.hierarchy.original[j]] for j in chain] for chain in result.hierarchy.groups]
+    if result.substeps:
+        info["result"]["spring_substeps"] = result.substeps
     if result.correct_report is not None:
         info["result"]["correct"] = {
             k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(result.correct_report).items()

@@ -123,7 +123,7 @@ def test_config_file_and_flags(runner, sample_clip, tmp_path):
     info = json.loads((tmp_path / "cmu_09_01_run_daz.json").read_text())
     assert info["config"]["extrapolate"]["omega"] == 4.0
     assert info["config"]["extrapolate"]["weights"] == {"left_arm": 2.0}
-    assert info["stages"] == ["extrapolate"]
+    assert info["stages"] == ["extrapolate", "subjoints", "springs"]
     bad = tmp_path / "bad.toml"
     bad.write_text("[correct]\ndelta = 2\n")
     result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "x"), "--config", str(bad)])

@@ -15,11 +15,12 @@ from mocap_exaggerate.pipeline import (
     resolve_weights,
     run,
 )
+from mocap_exaggerate.rotations import quat_angle
 from mocap_exaggerate.stages.tpose import detect_rest_frames
 
 from .helpers import all_clip_params, shared, shared_clip_params
 
-IDENTITY = {"extrapolate": {"omega": 1.0}, "correct": {"enabled": False}}
+IDENTITY = {"extrapolate": {"omega": 1.0}, "correct": {"enabled": False}, "springs": {"enabled": False}}
 
 
 @pytest.mark.parametrize("path", all_clip_params())
@@ -27,22 +28,30 @@ def test_written_file_reproduces_the_computed_positions(path):
     motion, _ = read_bvh(path)
     result = run(motion, load_preset("looney"))
     written, _ = read_bvh(format_bvh(result.motion))
-    assert written.skeleton.names == motion.skeleton.names
+    assert written.skeleton.names == result.motion.skeleton.names
+    assert [written.skeleton.names[i] for i in result.original_index] == list(motion.skeleton.names)
     assert all(len(c) == 6 for c in written.skeleton.channels)
-    error = np.max(np.abs(written.world_positions() - result.world_positions))
-    assert error <= 1e-4 * motion.skeleton.height()
+    rotations, positions = written.forward_kinematics()
+    assert np.max(np.abs(positions - result.world_positions)) <= 1e-4 * motion.skeleton.height()
+    assert np.max(quat_angle(rotations, result.world_rotations)) <= 1e-4
     # Exaggeration did something: some link got longer than captured.
     assert result.max_link_stretch > 1.01
 
 
 @pytest.mark.parametrize("path", all_clip_params())
-def test_omega_one_with_correction_off_gives_the_input_back(path):
+@pytest.mark.parametrize("skeleton", ["sub", "original"])
+def test_omega_one_with_correction_and_springs_off_gives_the_input_back(path, skeleton):
     motion, _ = read_bvh(path)
-    result = run(motion, resolve_config("cartoon", None, IDENTITY))
+    result = run(motion, resolve_config("cartoon", None, {**IDENTITY, "output": {"skeleton": skeleton}}))
     written, _ = read_bvh(format_bvh(result.motion))
     height = motion.skeleton.height()
-    assert np.max(np.abs(result.world_positions - motion.world_positions())) <= 1e-6 * height
-    assert np.max(np.abs(written.world_positions() - motion.world_positions())) <= 1e-4 * height
+    captured_rot, captured_pos = motion.forward_kinematics()
+    index = result.original_index
+    assert np.max(np.abs(result.world_positions[:, index] - captured_pos)) <= 1e-6 * height
+    assert np.max(quat_angle(result.world_rotations[:, index], captured_rot)) <= 1e-6
+    written_rot, written_pos = written.forward_kinematics()
+    assert np.max(np.abs(written_pos[:, index] - captured_pos)) <= 1e-5 * height
+    assert np.max(quat_angle(written_rot[:, index], captured_rot)) <= 1e-4
 
 
 EXPECTED_REST_FRAMES = {
@@ -67,7 +76,9 @@ def test_rest_frames_are_written_unchanged_and_kept_out_of_the_filter(sample_cli
     motion, _ = read_bvh(sample_clip)
     auto = run(motion, load_preset("cartoon"))
     assert auto.rest_frames == 4
-    assert np.allclose(auto.world_positions[:4], motion.world_positions()[:4])
+    captured_rot, captured_pos = motion.forward_kinematics()
+    assert np.allclose(auto.world_positions[:4, auto.original_index], captured_pos[:4])
+    assert np.max(quat_angle(auto.world_rotations[:4, auto.original_index], captured_rot[:4])) < 1e-9
     keep = run(motion, resolve_config("cartoon", None, {"input": {"tpose": "keep"}}))
     # With the T-pose filtered along, the jump rings into the frames after it.
     ringing = np.abs(keep.world_positions[4:40] - auto.world_positions[4:40]).max()
@@ -158,7 +169,8 @@ def test_weights_by_joint_pattern_and_limb(sample_clip):
 
 def test_weight_zero_keeps_a_joint_as_captured(sample_clip):
     motion, _ = read_bvh(sample_clip)
-    config = resolve_config("cartoon", None, {"extrapolate": {"weights": {"hip": 0.0}}, "correct": {"enabled": False}})
+    config = resolve_config("cartoon", None, {"extrapolate": {"weights": {"hip": 0.0}}, "correct": {"enabled": False},
+                                              "springs": {"enabled": False}})
     result = run(motion, config)
     assert np.allclose(result.world_positions[:, 0], motion.world_positions()[:, 0])
 

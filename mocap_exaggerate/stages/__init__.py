@@ -2,18 +2,28 @@
 
 from .correct import CorrectConfig, CorrectReport, correct, stretch_error
 from .extrapolate import ExtrapolateConfig, extrapolate, gaussian_average, parse_duration
-from .orient import positions_to_motion
+from .orient import motion_from_world, positions_to_motion, recover_orientations
+from .springs import SpringConfig, simulate_springs
+from .subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints
 from .tpose import detect_rest_frames
 
 __all__ = [
     "CorrectConfig",
     "CorrectReport",
     "ExtrapolateConfig",
+    "SpringConfig",
+    "SubjointConfig",
+    "SubjointHierarchy",
+    "build_hierarchy",
     "correct",
     "detect_rest_frames",
     "extrapolate",
     "gaussian_average",
+    "motion_from_world",
     "parse_duration",
+    "position_subjoints",
     "positions_to_motion",
+    "recover_orientations",
+    "simulate_springs",
     "stretch_error",
 ]

@@ -1,0 +1,342 @@
+"""Sub-joint hierarchy and rubber-joint groups (Kwon & Lee 2008, sections 5.1 and 5.2).
+
+Every link is cut into equal sub-links with a new sub-joint at the end of
+each; the sub-joint that lands on an original joint keeps its name, the
+others are called ``<Joint>_s1``, ``<Joint>_s2``, … after the joint their link
+ends at (each link has exactly one), counted from the parent side.
+
+Rubber-joint groups (RJG): an end effector is in a group, and so is a parent
+whose only child is in it. Real skeletons have fingers, toes, twist bones and
+face rigs that would cut every group at the hand or foot, so minor branches
+are pruned first: they ride rigidly on their parent and get no sub-joints.
+Within a group the positions of the original joints are interpolated, frame
+by frame, by a C1 piecewise cubic Bézier curve parameterised by cumulative
+rest link length, and each sub-joint sits on it at its own parameter.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..limbs import find_limbs
+from ..skeleton import POSITION_CHANNELS, Skeleton
+
+__all__ = [
+    "SubjointConfig",
+    "SubjointHierarchy",
+    "build_hierarchy",
+    "minor_branches",
+    "rubber_groups",
+    "position_subjoints",
+    "bezier_points",
+]
+
+#: Names of branches that never carry a rubber limb: digits, face, helpers.
+_MINOR_NAME = re.compile(
+    r"finger|thumb|index|middle|ring|pinky|toe|eye|jaw|tongue|teeth|facial|twist|share|^__|nub$|_end$",
+    re.IGNORECASE,
+)
+#: A side branch whose reach is under this share of its longest sibling's is minor.
+MINOR_REACH = 0.35
+
+
+@dataclass(frozen=True, kw_only=True)
+class SubjointConfig:
+    """Settings of the sub-joint block.
+
+    per_link : every (non-rigid, non-zero) link is cut into this many equal sub-links
+    sublink_length : if set, a target sub-link length instead, in skeleton units
+        (a number) or as a share of the skeleton height (``"3%"``); each link
+        gets ``max(1, round(length / target))`` sub-links
+    groups : explicit rubber-joint groups, each a list of joint names from the
+        top of the chain to its end; replaces the automatic grouping
+    rigid : extra joint-name patterns whose subtrees ride rigidly (no sub-joints)
+    """
+
+    enabled: bool = True
+    per_link: int = 4
+    sublink_length: float | str | None = None
+    groups: tuple[tuple[str, ...], ...] = field(default=())
+    rigid: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        if isinstance(self.per_link, bool) or not isinstance(self.per_link, int) or not 1 <= self.per_link <= 32:
+            raise ConfigError(f"subjoints.per_link must be a whole number from 1 to 32, got {self.per_link!r}")
+        if self.sublink_length is not None:
+            self._target(1.0)
+        object.__setattr__(self, "groups", tuple(tuple(str(n) for n in g) for g in self.groups))
+        object.__setattr__(self, "rigid", tuple(str(p) for p in self.rigid))
+        for group in self.groups:
+            if len(group) < 2:
+                raise ConfigError(f"subjoints.groups: a group needs at least two joints, got {list(group)}")
+
+    def _target(self, height: float) -> float:
+        value = self.sublink_length
+        if isinstance(value, str) and value.strip().endswith("%"):
+            try:
+                share = float(value.strip()[:-1]) / 100.0
+            except ValueError:
+                share = -1.0
+            target = share * height
+        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+            target = float(value)
+        else:
+            target = -1.0
+        if not np.isfinite(target) or target <= 0:
+            raise ConfigError(f"subjoints.sublink_length must be a positive length or a share like '3%', got {value!r}")
+        return target
+
+
+@dataclass(frozen=True, eq=False)
+class SubjointHierarchy:
+    """The sub-joint skeleton and how it maps onto the original one.
+
+    skeleton : Skeleton with J' joints, 6 channels each
+    original : (J,) int, index in ``skeleton`` of each original joint
+    link_child : (J',) int, original joint at the end of the link each joint lies on
+        (an original joint: itself)
+    link_parent : (J',) int, original joint at the start of that link (-1 for the root)
+    fraction : (J',) float, position along the link, 1.0 on original joints
+    rigid : (J,) bool, original joints that ride rigidly on their parent
+    groups : tuple of chains of original joint indices; each starts with the
+        branch joint the group hangs from (when there is one)
+    """
+
+    skeleton: Skeleton
+    original: np.ndarray
+    link_child: np.ndarray
+    link_parent: np.ndarray
+    fraction: np.ndarray
+    rigid: np.ndarray
+    groups: tuple[tuple[int, ...], ...]
+
+    @property
+    def is_original(self) -> np.ndarray:
+        return self.fraction == 1.0
+
+
+def minor_branches(skeleton: Skeleton, extra_rigid: tuple[str, ...] = ()) -> np.ndarray:
+    """(J,) bool: joints on minor branches, which ride rigidly on their parent.
+
+    Pruned: everything below a found arm or leg end (hands' fingers, feet's
+    toes); subtrees named like fingers, toes, eyes, jaws, twist or share bones
+    or helpers, unless they lead to a limb; side branches much shorter than
+    their longest sibling (the same limb-guard applies); ``extra_rigid``
+    patterns.
+    """
+    count = skeleton.num_joints
+    limbs = find_limbs(skeleton)
+    protected = np.zeros(count, bool)
+    for limb in limbs.values():
+        for j in limb.joints:
+            protected[_ancestors(skeleton, j)] = True
+    rigid = np.zeros(count, bool)
+    for name, limb in limbs.items():
+        if name.endswith(("_arm", "_leg")):
+            below = skeleton.descendants(limb.end)[1:]
+            rigid[below] = True
+    reach = _reach(skeleton)
+    for j in range(1, count):
+        if protected[j] or rigid[j]:
+            continue
+        if _MINOR_NAME.search(skeleton.names[j]):
+            rigid[skeleton.descendants(j)] = True
+            continue
+        siblings = skeleton.children(skeleton.parents[j])
+        longest = max(reach[s] + skeleton.link_lengths()[s] for s in siblings)
+        if len(siblings) > 1 and reach[j] + skeleton.link_lengths()[j] < MINOR_REACH * longest:
+            rigid[skeleton.descendants(j)] = True
+    for pattern in extra_rigid:
+        matched = skeleton.match(pattern)
+        if not len(matched):
+            raise ConfigError(f"subjoints.rigid: no joint matches {pattern!r}")
+        for j in matched:
+            rigid[skeleton.descendants(int(j))] = True
+    rigid[0] = False
+    return rigid
+
+
+def _ancestors(skeleton: Skeleton, joint: int) -> list[int]:
+    out = []
+    while joint >= 0:
+        out.append(joint)
+        joint = int(skeleton.parents[joint])
+    return out
+
+
+def _reach(skeleton: Skeleton) -> np.ndarray:
+    """Longest rest path from each joint down to a leaf or End Site, ``(J,)``."""
+    lengths = skeleton.link_lengths()
+    ends = np.where(np.isfinite(skeleton.end_sites[:, 0]), np.linalg.norm(np.nan_to_num(skeleton.end_sites), axis=1), 0.0)
+    reach = ends.copy()
+    for j in range(skeleton.num_joints - 1, 0, -1):
+        p = skeleton.parents[j]
+        reach[p] = max(reach[p], reach[j] + lengths[j])
+    return reach
+
+
+def rubber_groups(skeleton: Skeleton, rigid: np.ndarray) -> tuple[tuple[int, ...], ...]:
+    """Chains of original joints that bend as one rubber hose.
+
+    Each chain runs from the joint it hangs from (a branch joint, or the root)
+    down to an end effector of the pruned tree.
+    """
+    kept_children = [[int(c) for c in skeleton.children(j) if not rigid[c]] for j in range(skeleton.num_joints)]
+    groups = []
+    for end in range(1, skeleton.num_joints):
+        if rigid[end] or kept_children[end]:
+            continue
+        chain = [end]
+        joint = end
+        while skeleton.parents[joint] > 0 and len(kept_children[skeleton.parents[joint]]) == 1:
+            joint = int(skeleton.parents[joint])
+            chain.append(joint)
+        chain.append(int(skeleton.parents[joint]))  # the branch joint the group hangs from
+        groups.append(tuple(chain[::-1]))
+    return tuple(groups)
+
+
+def build_hierarchy(skeleton: Skeleton, config: SubjointConfig | None = None) -> SubjointHierarchy:
+    """Cut the links of ``skeleton`` into sub-links and find its rubber-joint groups."""
+    config = config or SubjointConfig()
+    rigid = minor_branches(skeleton, config.rigid)
+    if config.groups:
+        groups = []
+        for names in config.groups:
+            try:
+                chain = [skeleton.index(n) for n in names]
+            except KeyError as error:
+                raise ConfigError(f"subjoints.groups: {error.args[0]}") from None
+            for upper, lower in zip(chain, chain[1:]):
+                if skeleton.parents[lower] != upper:
+                    raise ConfigError(
+                        f"subjoints.groups: {skeleton.names[lower]} is not a child of {skeleton.names[upper]}"
+                    )
+            groups.append(tuple(chain))
+            rigid[chain[1:]] = False
+        groups = tuple(groups)
+    else:
+        groups = rubber_groups(skeleton, rigid)
+
+    lengths = skeleton.link_lengths()
+    if config.sublink_length is not None:
+        target = config._target(skeleton.height())
+        cuts = np.maximum(1, np.rint(lengths / target)).astype(np.int64)
+    else:
+        cuts = np.full(skeleton.num_joints, config.per_link, dtype=np.int64)
+    cuts[(lengths <= 0) | rigid] = 1
+    cuts[0] = 1
+
+    names: list[str] = []
+    parents: list[int] = []
+    offsets: list[np.ndarray] = []
+    channels: list[tuple[str, ...]] = []
+    end_sites: list[np.ndarray] = []
+    link_child: list[int] = []
+    link_parent: list[int] = []
+    fraction: list[float] = []
+    original = np.empty(skeleton.num_joints, dtype=np.int64)
+    taken = set(skeleton.names)
+    for j in range(skeleton.num_joints):
+        order = skeleton.rotation_order(j)
+        joint_channels = POSITION_CHANNELS + tuple(f"{a}rotation" for a in order)
+        parent = -1 if j == 0 else int(original[skeleton.parents[j]])
+        step = skeleton.offsets[j] / cuts[j]
+        for k in range(1, cuts[j]):
+            name = f"{skeleton.names[j]}_s{k}"
+            while name in taken:
+                name += "_"
+            taken.add(name)
+            names.append(name)
+            parents.append(parent)
+            offsets.append(step)
+            channels.append(joint_channels)
+            end_sites.append(np.full(3, np.nan))
+            link_child.append(j)
+            link_parent.append(int(skeleton.parents[j]))
+            fraction.append(k / cuts[j])
+            parent = len(names) - 1
+        original[j] = len(names)
+        names.append(skeleton.names[j])
+        parents.append(parent)
+        offsets.append(step if j > 0 else skeleton.offsets[0])
+        channels.append(joint_channels)
+        end_sites.append(skeleton.end_sites[j])
+        link_child.append(j)
+        link_parent.append(int(skeleton.parents[j]))
+        fraction.append(1.0)
+    sub = Skeleton(tuple(names), np.array(parents), np.array(offsets), tuple(channels), np.array(end_sites))
+    return SubjointHierarchy(
+        sub, original, np.array(link_child), np.array(link_parent), np.array(fraction), rigid, groups
+    )
+
+
+def bezier_points(points: np.ndarray, knots: np.ndarray, params: np.ndarray) -> np.ndarray:
+    """Evaluate the C1 piecewise cubic Bézier through ``points`` at ``params``.
+
+    points : (F, n, 3) float64, the curve passes through each at its knot
+    knots : (n,) float64, strictly increasing parameters (cumulative rest length)
+    params : (S,) float64 within ``[knots[0], knots[-1]]``
+
+    Tangents come from the neighbouring points (centred differences, one-sided
+    at the ends), so a chain of points spaced in proportion to their knots
+    lies on a line traversed at constant speed: its sub-joints are evenly
+    spaced. Returns (F, S, 3).
+    """
+    n = len(knots)
+    if n < 2:
+        return np.repeat(points[:, :1], len(params), axis=1)
+    tangents = np.empty_like(points)
+    tangents[:, 0] = (points[:, 1] - points[:, 0]) / (knots[1] - knots[0])
+    tangents[:, -1] = (points[:, -1] - points[:, -2]) / (knots[-1] - knots[-2])
+    if n > 2:
+        tangents[:, 1:-1] = (points[:, 2:] - points[:, :-2]) / (knots[2:] - knots[:-2])[:, None]
+    segment = np.clip(np.searchsorted(knots, params, side="right") - 1, 0, n - 2)
+    width = knots[segment + 1] - knots[segment]
+    u = ((params - knots[segment]) / width)[:, None]
+    # Bézier control points of each segment: P_i, P_i + h T_i / 3, P_i+1 - h T_i+1 / 3, P_i+1.
+    b0 = points[:, segment]
+    b3 = points[:, segment + 1]
+    b1 = b0 + tangents[:, segment] * (width / 3.0)[:, None]
+    b2 = b3 - tangents[:, segment + 1] * (width / 3.0)[:, None]
+    v = 1.0 - u
+    return v**3 * b0 + 3 * v * v * u * b1 + 3 * v * u * u * b2 + u**3 * b3
+
+
+def position_subjoints(world_pos: np.ndarray, hierarchy: SubjointHierarchy, rest_lengths: np.ndarray) -> np.ndarray:
+    """Sub-joint positions ``(F, J', 3)`` from original-joint positions ``(F, J, 3)``.
+
+    Original joints stay where they are. Sub-joints in a rubber-joint group
+    lie on the group's Bézier curve; the others on the straight link.
+    """
+    world_pos = np.asarray(world_pos, dtype=np.float64)
+    frames = world_pos.shape[0]
+    count = hierarchy.skeleton.num_joints
+    out = np.empty((frames, count, 3))
+    out[:, hierarchy.original] = world_pos
+    sub = np.flatnonzero(~hierarchy.is_original)
+    if not len(sub):
+        return out
+    f = hierarchy.fraction[sub][:, None]
+    out[:, sub] = (1 - f) * world_pos[:, hierarchy.link_parent[sub]] + f * world_pos[:, hierarchy.link_child[sub]]
+    for chain in hierarchy.groups:
+        chain = np.asarray(chain)
+        along = np.concatenate([[0.0], np.cumsum(rest_lengths[chain[1:]])])
+        # Joints at the end of a zero-length link coincide with the previous knot: keep the first.
+        knot_mask = np.concatenate([[True], rest_lengths[chain[1:]] > 0])
+        knots = along[knot_mask]
+        if len(knots) < 2:
+            continue
+        on_chain = np.isin(hierarchy.link_child[sub], chain[1:])
+        members = sub[on_chain]
+        if not len(members):
+            continue
+        index = {int(j): k for k, j in enumerate(chain)}
+        child_at = np.array([index[int(c)] for c in hierarchy.link_child[members]])
+        params = along[child_at - 1] + hierarchy.fraction[members] * rest_lengths[hierarchy.link_child[members]]
+        out[:, members] = bezier_points(world_pos[:, chain[knot_mask]], knots, params)
+    return out
