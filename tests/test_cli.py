@@ -187,3 +187,50 @@ def test_fps_flag_changes_sigma_in_frames(runner, tmp_path):
     b, _ = read_bvh(tmp_path / "b" / clip.name)
     assert b.frame_time == pytest.approx(1 / 120)
     assert not np.allclose(a.world_positions(), b.world_positions())
+
+
+def test_rubber_options_and_original_skeleton(runner, sample_clip, tmp_path):
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "a"), "--subjoints", "6",
+                                 "--blend", "0.7", "--stiffness", "100", "--damping", "4", "--link-stiffness", "50"])
+    assert result.exit_code == 0, result.stderr
+    info = json.loads((tmp_path / "a" / "cmu_09_01_run_daz.json").read_text())
+    assert info["config"]["subjoints"]["per_link"] == 6
+    assert info["config"]["springs"] == {"enabled": True, "stiffness": 100.0, "link_stiffness": 50.0,
+                                         "damping": 4.0, "blend": 0.7}
+    assert info["result"]["subjoints"] == read_bvh(tmp_path / "a" / "cmu_09_01_run_daz.bvh")[0].skeleton.num_joints
+    assert ["chest", "lCollar", "lShldr", "lForeArm", "lHand"] in info["result"]["groups"]
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "b"), "--skeleton", "original"])
+    assert result.exit_code == 0, result.stderr
+    assert read_bvh(tmp_path / "b" / "cmu_09_01_run_daz.bvh")[0].skeleton.num_joints == 43
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "c"), "--no-subjoints",
+                                 "--no-springs", "--sublink-length", "3%"])
+    assert result.exit_code == 0, result.stderr
+    info = json.loads((tmp_path / "c" / "cmu_09_01_run_daz.json").read_text())
+    assert info["stages"] == ["extrapolate", "correct"]
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--blend", "2"], "springs.blend"),
+        (["--stiffness", "-5"], "springs.stiffness"),
+        (["--subjoints", "0"], "subjoints.per_link"),
+        (["--sublink-length", "long"], "subjoints.sublink_length"),
+        (["--skeleton", "both"], "both"),
+    ],
+)
+def test_bad_rubber_options_exit_2(runner, sample_clip, tmp_path, args, words):
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "o"), *args])
+    assert result.exit_code == 2, result.output
+    assert words in result.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_info_groups(runner, sample_clip):
+    result = runner.invoke(cli, ["info", str(sample_clip), "--groups"])
+    assert result.exit_code == 0, result.output
+    assert "group       chest | lCollar > lShldr > lForeArm > lHand" in result.output
+    assert "group       hip | rButtock > rThigh > rShin > rFoot" in result.output
+    assert "rigid       leftEye" in result.output
+    data = json.loads(runner.invoke(cli, ["info", str(sample_clip), "--groups", "--json"]).output)
+    assert len(data["groups"]) == 5 and data["subjoints"] == 103

@@ -18,6 +18,7 @@ from mocap_exaggerate.pipeline import (
 from mocap_exaggerate.rotations import quat_angle
 from mocap_exaggerate.stages.tpose import detect_rest_frames
 
+from .helpers import SAMPLE_DIR as ROOT_SAMPLE
 from .helpers import all_clip_params, shared, shared_clip_params
 
 IDENTITY = {"extrapolate": {"omega": 1.0}, "correct": {"enabled": False}, "springs": {"enabled": False}}
@@ -205,3 +206,40 @@ def test_limb_names_on_a_cmu_skeleton():
     assert names["left_arm"] == ["lhumerus", "lradius", "lwrist"]
     assert names["right_leg"] == ["rfemur", "rtibia", "rfoot"]
     assert names["neck"] == ["lowerneck", "upperneck", "head"]
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    omega=st.sampled_from([0.0, 1.0, 50.0]),
+    sigma=st.sampled_from(["0f", "0.5f", "1s", "200f"]),
+    threshold=st.sampled_from([0.0, 10.0]),
+    delta=st.sampled_from([1e-3, 1.0]),
+    max_stretch=st.sampled_from([1.0, 10.0]),
+    per_link=st.sampled_from([1, 32]),
+    stiffness=st.sampled_from([1.0, 1e5]),
+    link_stiffness=st.sampled_from([0.0, 1e5]),
+    damping=st.sampled_from([0.0, 1e4]),
+    blend=st.sampled_from([0.0, 1.0]),
+)
+def test_no_nan_or_inf_at_the_limits_the_cli_accepts(
+    omega, sigma, threshold, delta, max_stretch, per_link, stiffness, link_stiffness, damping, blend
+):
+    motion = CLIP_FOR_SWEEP
+    config = resolve_config("cartoon", None, {
+        "extrapolate": {"omega": omega, "sigma": sigma},
+        "correct": {"threshold": threshold, "delta": delta, "max_stretch": max_stretch},
+        "subjoints": {"per_link": per_link},
+        "springs": {"stiffness": stiffness, "link_stiffness": link_stiffness, "damping": damping, "blend": blend},
+    })
+    result = run(motion, config)
+    assert np.all(np.isfinite(result.world_positions))
+    assert np.all(np.isfinite(result.world_rotations))
+    data = format_bvh(result.motion)
+    assert read_bvh(data)[0].num_frames == motion.num_frames
+
+
+CLIP_FOR_SWEEP = read_bvh(ROOT_SAMPLE / "cmu_09_01_run_daz.bvh")[0].slice(slice(0, 40))

@@ -1,0 +1,91 @@
+"""Orientation recovery helpers, and the written sub-joint BVH read back by bvhio."""
+
+import bvhio
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
+from mocap_exaggerate.pipeline import load_preset, resolve_config, run
+from mocap_exaggerate.rotations import quat_angle, quat_rotate
+from mocap_exaggerate.stages.orient import _kabsch, quat_between, quat_slerp
+
+rng = np.random.default_rng(11)
+
+
+def test_quat_between_is_the_smallest_rotation():
+    u = rng.normal(size=(200, 3))
+    v = rng.normal(size=(200, 3)) * 3.0
+    q = quat_between(u, v)
+    turned = quat_rotate(q, u)
+    assert np.allclose(turned / np.linalg.norm(turned, axis=1, keepdims=True),
+                       v / np.linalg.norm(v, axis=1, keepdims=True))
+    cos = np.sum(u * v, 1) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1)
+    assert np.allclose(quat_angle(q, np.tile([0, 0, 0, 1.0], (200, 1))), np.arccos(np.clip(cos, -1, 1)))
+
+
+def test_quat_between_degenerate_cases():
+    u = np.array([[1.0, 0, 0], [0, 2.0, 0], [0, 0, 0], [1.0, 1.0, 0]])
+    v = np.array([[-3.0, 0, 0], [0, 0, 0], [1.0, 0, 0], [1.0, 1.0, 0]])
+    q = quat_between(u, v)
+    assert np.all(np.isfinite(q))
+    assert np.allclose(quat_rotate(q[0], u[0]) / 1.0, [-1, 0, 0])
+    assert np.allclose(q[1:], [0, 0, 0, 1])
+
+
+def test_slerp_endpoints_and_midpoint():
+    a = Rotation.random(50, random_state=1).as_quat()
+    b = Rotation.random(50, random_state=2).as_quat()
+    assert np.allclose(quat_angle(quat_slerp(a, b, 0.0), a), 0, atol=1e-7)
+    assert np.allclose(quat_angle(quat_slerp(a, b, 1.0), b), 0, atol=1e-7)
+    mid = quat_slerp(a, b, 0.5)
+    assert np.allclose(quat_angle(a, mid), quat_angle(a, b) / 2, atol=1e-7)
+
+
+def test_kabsch_recovers_a_known_rotation():
+    truth = Rotation.random(30, random_state=3)
+    u = rng.normal(size=(30, 4, 3))
+    v = np.stack([truth[i].apply(u[i]) for i in range(30)])
+    assert np.max(quat_angle(_kabsch(u, v), truth.as_quat())) < 1e-9
+
+
+def test_written_subjoint_bvh_opens_in_bvhio_with_the_expected_joints(sample_clip, tmp_path):
+    motion, _ = read_bvh(sample_clip)
+    result = run(motion, load_preset("cartoon"))
+    path = tmp_path / "rubber.bvh"
+    path.write_bytes(format_bvh(result.motion))
+    root = bvhio.readAsHierarchy(str(path))
+    layout = root.layout()
+    assert len(layout) == result.motion.skeleton.num_joints == result.hierarchy.skeleton.num_joints
+    assert [joint.Name for joint, _, _ in layout] == list(result.motion.skeleton.names)
+    for frame in (10, 80, 148):
+        root.loadPose(frame)
+        theirs = np.array([list(joint.PositionWorld) for joint, _, _ in layout])
+        assert np.max(np.abs(theirs - result.world_positions[frame])) < 1e-4 * motion.skeleton.height()
+
+
+def test_original_skeleton_output_keeps_the_joint_set_and_channel_orders(sample_clip):
+    motion, _ = read_bvh(sample_clip)
+    result = run(motion, resolve_config("cartoon", None, {"output": {"skeleton": "original"}}))
+    assert result.motion.skeleton.names == motion.skeleton.names
+    orders = [motion.skeleton.rotation_order(j) for j in range(motion.skeleton.num_joints)]
+    assert [result.motion.skeleton.rotation_order(j) for j in range(motion.skeleton.num_joints)] == orders
+    # Springs moved the original joints: the output is not merely the exaggerated positions.
+    springs_off = run(motion, resolve_config("cartoon", None, {"output": {"skeleton": "original"},
+                                                               "springs": {"enabled": False}}))
+    assert not np.allclose(result.world_positions, springs_off.world_positions)
+
+
+@pytest.mark.parametrize("preset", ["subtle", "cartoon", "looney"])
+def test_rubber_limbs_bend(sample_clip, preset):
+    # Sub-joints between shoulder and hand leave the straight lines between original joints.
+    motion, _ = read_bvh(sample_clip)
+    result = run(motion, load_preset(preset))
+    h = result.hierarchy
+    between = np.flatnonzero(~h.is_original & ~h.rigid[h.link_child])
+    a = result.world_positions[:, h.original[h.link_parent[between]]]
+    b = result.world_positions[:, h.original[h.link_child[between]]]
+    p = result.world_positions[:, between]
+    f = h.fraction[between][None, :, None]
+    off_line = np.linalg.norm(p - ((1 - f) * a + f * b), axis=-1)
+    assert off_line.max() > 0.01 * motion.skeleton.height()
