@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
-from mocap_exaggerate.pipeline import load_preset, run
+from mocap_exaggerate.pipeline import load_preset, resolve_config, run
+from mocap_exaggerate.stages.subjoints import SubjointConfig, build_hierarchy
 
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared" / "data" / "bvh"
@@ -81,6 +82,30 @@ def measure(path: Path, preset: str, repeat: int, with_bvhio: bool) -> None:
               f"the whole command takes {t_command / t_bvhio:.3f} of bvhio's read (target <= 0.1)")
 
 
+#: Kwon & Lee 2008, Table 1: ms per frame for 23 joints -> 58 sub-joints on a 2.13 GHz Core2.
+PAPER_MS_PER_FRAME = {"Walk": 11.76, "Run": 5.82, "Kick": 12.80, "Cossack": 11.71}
+PAPER_SUBJOINTS = 58
+
+
+def compare_with_paper(path: Path, repeat: int) -> None:
+    """The whole in-memory pipeline at the paper's sub-joint count, per frame."""
+    motion, _ = read_bvh(path)
+    per_link = min(range(1, 9), key=lambda k: abs(
+        build_hierarchy(motion.skeleton, SubjointConfig(per_link=k)).skeleton.num_joints - PAPER_SUBJOINTS))
+    config = resolve_config("cartoon", None, {"subjoints": {"per_link": per_link}})
+    result = run(motion, config)  # also compiles or loads the spring kernel
+    seconds = best_of(lambda: run(motion, config), repeat)
+    per_frame = seconds / motion.num_frames * 1e3
+    joints = result.motion.skeleton.num_joints
+    print(f"paper comparison on {path.name}: {motion.skeleton.num_joints} joints -> {joints} sub-joints "
+          f"(per_link={per_link}), {result.substeps} spring substep(s) per frame")
+    for name, value in result.timings.items():
+        print(f"    {name:<18}{value / motion.num_frames * 1e3:8.4f} ms per frame")
+    print(f"  whole pipeline  {per_frame:.4f} ms per frame")
+    for take, paper in PAPER_MS_PER_FRAME.items():
+        print(f"    vs paper {take:<8} {paper:6.2f} ms per frame: {paper / per_frame:6.0f}x faster")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--preset", default="cartoon")
@@ -89,6 +114,7 @@ def main() -> None:
     parser.add_argument("--no-bvhio", action="store_true", help="skip bvhio (slow: ~25 s on 10k frames)")
     args = parser.parse_args()
     clip = longest_clip()
+    compare_with_paper(clip, args.repeat)
     measure(clip, args.preset, args.repeat, not args.no_bvhio)
     with tempfile.TemporaryDirectory() as tmp:
         measure(tiled(clip, args.frames, Path(tmp)), args.preset, args.repeat, not args.no_bvhio)

@@ -321,14 +321,15 @@ def run(motion: Motion, config: PipelineConfig | None = None) -> PipelineResult:
     notes: list[str] = []
 
     start = time.perf_counter()
-    rest = detect_rest_frames(motion) if config.input.tpose in ("auto", "drop") else 0
+    world_rot, world = motion.forward_kinematics()
+    rest = detect_rest_frames(motion, world) if config.input.tpose in ("auto", "drop") else 0
     dropped = config.input.tpose == "drop" and rest > 0
     if dropped:
         motion = motion.slice(slice(rest, None))
+        world_rot, world = world_rot[rest:], world[rest:]
         notes.append(f"dropped {rest} leading rest-pose frame(s)")
     elif rest:
         notes.append(f"kept {rest} leading rest-pose frame(s) out of the filters, unchanged")
-    world_rot, world = motion.forward_kinematics()
     timings["forward_kinematics"] = time.perf_counter() - start
 
     first = 0 if dropped else rest

@@ -18,10 +18,11 @@ recovered parent.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from ..motion import Motion
-from ..rotations import quat_inv, quat_mul, quat_normalize, quat_rotate
+from ..rotations import _cross, quat_mul, quat_normalize, quat_rotate, quat_slerp
 from .subjoints import SubjointHierarchy
 
 __all__ = ["positions_to_motion", "recover_orientations", "quat_between", "quat_slerp", "motion_from_world"]
@@ -46,15 +47,77 @@ def positions_to_motion(world_pos: np.ndarray, source: Motion, world_rot: np.nda
 
 def motion_from_world(world_pos, world_rot, skeleton, frame_time, euler_hint=None) -> Motion:
     """Local 6-DOF channels from world transforms ``(F, J, 3)`` and ``(F, J, 4)``."""
-    parents = skeleton.parents
+    world_pos = np.ascontiguousarray(world_pos, dtype=np.float64)
+    world_rot = np.ascontiguousarray(world_rot, dtype=np.float64)
     local_pos = np.empty_like(world_pos)
     local_rot = np.empty_like(world_rot)
-    local_pos[:, 0] = world_pos[:, 0]
-    local_rot[:, 0] = world_rot[:, 0]
-    inverse = quat_inv(world_rot[:, parents[1:]])
-    local_pos[:, 1:] = quat_rotate(inverse, world_pos[:, 1:] - world_pos[:, parents[1:]])
-    local_rot[:, 1:] = quat_normalize(quat_mul(inverse, world_rot[:, 1:]))
+    _local_from_world(world_pos, world_rot, np.asarray(skeleton.parents, dtype=np.int64), local_pos, local_rot)
     return Motion(skeleton, frame_time, local_rot, local_pos, euler_hint)
+
+
+@numba.njit(cache=True)
+def _local_from_world(world_pos, world_rot, parents, local_pos, local_rot):  # pragma: no cover - compiled
+    """Each joint's transform in its parent's frame; one pass, no temporaries."""
+    frames, joints = world_pos.shape[0], world_pos.shape[1]
+    for f in range(frames):
+        for a in range(3):
+            local_pos[f, 0, a] = world_pos[f, 0, a]
+        for a in range(4):
+            local_rot[f, 0, a] = world_rot[f, 0, a]
+        for j in range(1, joints):
+            p = parents[j]
+            # Inverse (conjugate) of the parent's rotation.
+            ux, uy, uz, w = -world_rot[f, p, 0], -world_rot[f, p, 1], -world_rot[f, p, 2], world_rot[f, p, 3]
+            vx = world_pos[f, j, 0] - world_pos[f, p, 0]
+            vy = world_pos[f, j, 1] - world_pos[f, p, 1]
+            vz = world_pos[f, j, 2] - world_pos[f, p, 2]
+            tx = 2.0 * (uy * vz - uz * vy)
+            ty = 2.0 * (uz * vx - ux * vz)
+            tz = 2.0 * (ux * vy - uy * vx)
+            local_pos[f, j, 0] = vx + w * tx + (uy * tz - uz * ty)
+            local_pos[f, j, 1] = vy + w * ty + (uz * tx - ux * tz)
+            local_pos[f, j, 2] = vz + w * tz + (ux * ty - uy * tx)
+            bx, by, bz, bw = world_rot[f, j, 0], world_rot[f, j, 1], world_rot[f, j, 2], world_rot[f, j, 3]
+            local_rot[f, j, 0] = w * bx + ux * bw + uy * bz - uz * by
+            local_rot[f, j, 1] = w * by - ux * bz + uy * bw + uz * bx
+            local_rot[f, j, 2] = w * bz + ux * by - uy * bx + uz * bw
+            local_rot[f, j, 3] = w * bw - ux * bx - uy * by - uz * bz
+
+
+@numba.njit(cache=True)
+def _slerp_links(world, first, second, fraction, out, target):  # pragma: no cover - compiled
+    """out[:, target[s]] = slerp(world[:, first[s]], world[:, second[s]], fraction[s])."""
+    frames = world.shape[0]
+    for f in range(frames):
+        for s in range(first.shape[0]):
+            a = first[s]
+            b = second[s]
+            t = fraction[s]
+            dot = 0.0
+            for i in range(4):
+                dot += world[f, a, i] * world[f, b, i]
+            sign = 1.0
+            if dot < 0.0:
+                dot = -dot
+                sign = -1.0
+            if dot > 1.0:
+                dot = 1.0
+            angle = np.arccos(dot)
+            sin = np.sin(angle)
+            if sin < 1e-9:
+                wa = 1.0 - t
+                wb = sign * t
+            else:
+                wa = np.sin((1.0 - t) * angle) / sin
+                wb = sign * np.sin(t * angle) / sin
+            norm = 0.0
+            for i in range(4):
+                value = wa * world[f, a, i] + wb * world[f, b, i]
+                out[f, target[s], i] = value
+                norm += value * value
+            norm = np.sqrt(norm)
+            for i in range(4):
+                out[f, target[s], i] /= norm
 
 
 def quat_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -67,7 +130,7 @@ def quat_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
     nu = np.linalg.norm(u, axis=-1, keepdims=True)
     nv = np.linalg.norm(v, axis=-1, keepdims=True)
-    q = np.concatenate([np.cross(u, v), nu * nv + np.sum(u * v, axis=-1, keepdims=True)], axis=-1)
+    q = np.concatenate([_cross(u, v), nu * nv + np.sum(u * v, axis=-1, keepdims=True)], axis=-1)
     norm = np.linalg.norm(q, axis=-1, keepdims=True)
     tiny = 1e-12 * np.maximum(nu * nv, 1e-300)
     opposite = (norm <= tiny) & (nu * nv > 0)
@@ -75,7 +138,7 @@ def quat_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
         # Any axis perpendicular to u: cross with the coordinate axis least aligned with it.
         axis_index = np.argmin(np.abs(u), axis=-1)
         helper = np.eye(3)[axis_index]
-        perpendicular = np.cross(u, helper)
+        perpendicular = _cross(u, helper)
         perpendicular /= np.maximum(np.linalg.norm(perpendicular, axis=-1, keepdims=True), 1e-300)
         flipped = np.concatenate([perpendicular, np.zeros(u.shape[:-1] + (1,))], axis=-1)
         q = np.where(opposite, flipped, q)
@@ -86,32 +149,26 @@ def quat_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.where(degenerate, identity, q / np.where(norm > 0, norm, 1.0))
 
 
-def quat_slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarray:
-    """Spherical interpolation from ``a`` (t = 0) to ``b`` (t = 1) along the shorter arc."""
-    t = np.asarray(t, dtype=np.float64)[..., None] if np.ndim(t) else float(t)
-    dot = np.sum(a * b, axis=-1, keepdims=True)
-    b = np.where(dot < 0, -b, b)
-    dot = np.abs(dot)
-    angle = np.arccos(np.clip(dot, -1.0, 1.0))
-    sin = np.sin(angle)
-    close = sin < 1e-9
-    safe = np.where(close, 1.0, sin)
-    wa = np.where(close, 1.0 - t, np.sin((1.0 - t) * angle) / safe)
-    wb = np.where(close, t, np.sin(t * angle) / safe)
-    return quat_normalize(wa * a + wb * b)
+def _triad(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotations ``(F, 4)`` carrying vector sets ``u (F, n, 3)`` onto ``v (F, n, 3)`` (TRIAD).
 
-
-def _kabsch(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotations ``(F, 4)`` best carrying vector sets ``u (F, n, 3)`` onto ``v (F, n, 3)``."""
+    The first axis is the mean direction of the set, the second the member
+    farthest from it; exact when ``v`` is a rotated ``u``, and a few vector
+    operations instead of a per-frame SVD.
+    """
     from scipy.spatial.transform import Rotation
 
-    h = np.einsum("fni,fnj->fij", u, v)
-    left, _, right_t = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(np.einsum("fij,fjk->fik", left, right_t)))
-    d = np.where(d == 0, 1.0, d)
-    fix = np.ones(h.shape[:1] + (3,))
-    fix[:, 2] = d
-    matrix = np.einsum("fji,fj,fkj->fik", right_t, fix, left)
+    def frame(vectors: np.ndarray, pick: int) -> np.ndarray:
+        first = vectors.mean(axis=1)
+        first /= np.maximum(np.linalg.norm(first, axis=-1, keepdims=True), 1e-300)
+        second = _cross(first, vectors[:, pick])
+        second /= np.maximum(np.linalg.norm(second, axis=-1, keepdims=True), 1e-300)
+        return np.stack([first, second, _cross(first, second)], axis=-1)
+
+    middle = len(u) // 2
+    mean = u[middle].mean(axis=0)
+    pick = int(np.argmax(np.linalg.norm(np.cross(mean, u[middle]), axis=-1)))
+    matrix = np.einsum("fij,fkj->fik", frame(v, pick), frame(u, pick))
     return Rotation.from_matrix(matrix).as_quat()
 
 
@@ -174,6 +231,7 @@ def recover_orientations(
     world = np.zeros((frames, skeleton.num_joints, 4))
     world[..., 3] = 1.0
 
+    single_joint, single_from, single_to = [], [], []
     for j in range(skeleton.num_joints):
         if rigid[j]:
             continue
@@ -182,18 +240,28 @@ def recover_orientations(
             u = source_pos[:, targets] - source_pos[:, j : j + 1]
             v = new_pos[:, targets] - new_pos[:, j : j + 1]
             sizes = np.linalg.svd(u[len(u) // 2], compute_uv=False)
-            spread = sizes[1] > 1e-2 * sizes[0]
-            turn = _kabsch(u, v) if spread else quat_between(u[:, 0], v[:, 0])
-        elif len(targets) == 1:
-            t = targets[0]
-            turn = quat_between(source_pos[:, t] - source_pos[:, j], new_pos[:, t] - new_pos[:, j])
+            if sizes[1] > 1e-2 * sizes[0]:
+                world[:, j] = quat_mul(_triad(u, v), source_rot[:, j])
+                continue
+            targets = targets[:1]
+        if len(targets) == 1:
+            single_joint.append(j)
+            single_from.append(j)
+            single_to.append(targets[0])
         else:
             above = _first_above_at_distance(skeleton, j)
-            if above < 0:
-                turn = np.tile([0.0, 0.0, 0.0, 1.0], (frames, 1))
+            if above >= 0:
+                single_joint.append(j)
+                single_from.append(above)
+                single_to.append(j)
             else:
-                turn = quat_between(source_pos[:, j] - source_pos[:, above], new_pos[:, j] - new_pos[:, above])
-        world[:, j] = quat_normalize(quat_mul(turn, source_rot[:, j]))
+                world[:, j] = source_rot[:, j]
+    if single_joint:
+        # One vectorised call for every joint turned by a single link.
+        turn = quat_between(
+            source_pos[:, single_to] - source_pos[:, single_from], new_pos[:, single_to] - new_pos[:, single_from]
+        )
+        world[:, single_joint] = quat_normalize(quat_mul(turn, source_rot[:, single_joint]))
 
     # Rigid branches: captured local transforms under the recovered parent.
     for j in range(1, skeleton.num_joints):
@@ -208,9 +276,12 @@ def recover_orientations(
     out[:, original] = world
     between = np.flatnonzero(~hierarchy.is_original)
     if len(between):
-        out[:, between] = quat_slerp(
-            world[:, hierarchy.link_parent[between]],
-            world[:, hierarchy.link_child[between]],
-            hierarchy.fraction[between][None, :],
+        _slerp_links(
+            np.ascontiguousarray(world),
+            hierarchy.link_parent[between].astype(np.int64),
+            hierarchy.link_child[between].astype(np.int64),
+            hierarchy.fraction[between].astype(np.float64),
+            out,
+            between.astype(np.int64),
         )
     return out, sub_pos

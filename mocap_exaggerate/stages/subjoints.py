@@ -228,7 +228,7 @@ def build_hierarchy(skeleton: Skeleton, config: SubjointConfig | None = None) ->
         cuts = np.maximum(1, np.rint(lengths / target)).astype(np.int64)
     else:
         cuts = np.full(skeleton.num_joints, config.per_link, dtype=np.int64)
-    cuts[(lengths <= 0) | rigid] = 1
+    cuts[(lengths < 1e-4 * skeleton.height()) | rigid] = 1  # zero (or hair-thin) links are not cut
     cuts[0] = 1
 
     names: list[str] = []
@@ -321,16 +321,23 @@ def position_subjoints(world_pos: np.ndarray, hierarchy: SubjointHierarchy, rest
     sub = np.flatnonzero(~hierarchy.is_original)
     if not len(sub):
         return out
-    f = hierarchy.fraction[sub][:, None]
-    out[:, sub] = (1 - f) * world_pos[:, hierarchy.link_parent[sub]] + f * world_pos[:, hierarchy.link_child[sub]]
-    for chain in hierarchy.groups:
-        chain = np.asarray(chain)
+    # Groups whose original joints are all at one point (zero-length links) have no curve.
+    curved = [np.asarray(c) for c in hierarchy.groups if np.sum(rest_lengths[np.asarray(c[1:])] > 0) >= 1]
+    in_group = np.zeros(len(sub), bool)
+    for chain in curved:
+        in_group |= np.isin(hierarchy.link_child[sub], chain[1:])
+    straight = sub[~in_group]
+    if len(straight):
+        f = hierarchy.fraction[straight][:, None]
+        out[:, straight] = (1 - f) * world_pos[:, hierarchy.link_parent[straight]] + f * world_pos[
+            :, hierarchy.link_child[straight]
+        ]
+    for chain in curved:
         along = np.concatenate([[0.0], np.cumsum(rest_lengths[chain[1:]])])
         # Joints at the end of a zero-length link coincide with the previous knot: keep the first.
-        knot_mask = np.concatenate([[True], rest_lengths[chain[1:]] > 0])
+        # (and so do joints a hair away: a 1e-5 link would make a wild tangent).
+        knot_mask = np.concatenate([[True], rest_lengths[chain[1:]] > 1e-4 * along[-1]])
         knots = along[knot_mask]
-        if len(knots) < 2:
-            continue
         on_chain = np.isin(hierarchy.link_child[sub], chain[1:])
         members = sub[on_chain]
         if not len(members):

@@ -21,7 +21,7 @@ REST_POSE_MAX_ANGLE = 30.0
 JUMP_FACTOR = 8.0
 
 
-def detect_rest_frames(motion: Motion) -> int:
+def detect_rest_frames(motion: Motion, world_positions: np.ndarray | None = None) -> int:
     """Number of leading frames that are a synthetic rest pose and its settling (0 if none).
 
     Frame 0 is a rest frame when (a) every non-root joint is within
@@ -29,6 +29,7 @@ def detect_rest_frames(motion: Motion) -> int:
     pose then jumps by more than `JUMP_FACTOR` times the clip's median
     per-frame change (and by over 1 % of the skeleton height). Frames after it
     count too while the jump into the next frame stays that large.
+    ``world_positions`` (F, J, 3) saves recomputing forward kinematics.
     """
     if motion.num_frames < 4:
         return 0
@@ -38,7 +39,7 @@ def detect_rest_frames(motion: Motion) -> int:
     turned = np.degrees(quat_angle(rot[0, 1:], identity))
     if turned.size and turned.max() > REST_POSE_MAX_ANGLE:
         return 0
-    world = motion.world_positions()
+    world = motion.world_positions() if world_positions is None else world_positions
     pose = world - world[:, :1]
     # Median over joints: a handful of wobbling fingers should not decide it.
     jump = np.median(np.linalg.norm(pose[1:] - pose[:-1], axis=-1), axis=1)
