@@ -21,7 +21,6 @@ import warnings
 
 import numba
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 __all__ = [
     "quat_identity",
@@ -47,9 +46,8 @@ def quat_identity(shape: tuple[int, ...] = ()) -> np.ndarray:
     return q
 
 
-@numba.guvectorize(["void(float64[:], float64[:], float64[:])"], "(n),(n)->(n)", cache=True)
-def _quat_mul_kernel(a, b, out):  # pragma: no cover - compiled
-    ax, ay, az, aw = a[0], a[1], a[2], a[3]
+@numba.njit(cache=True, inline="always")
+def _mul_into(ax, ay, az, aw, b, out):  # pragma: no cover - compiled
     bx, by, bz, bw = b[0], b[1], b[2], b[3]
     out[0] = aw * bx + ax * bw + ay * bz - az * by
     out[1] = aw * by - ax * bz + ay * bw + az * bx
@@ -57,9 +55,8 @@ def _quat_mul_kernel(a, b, out):  # pragma: no cover - compiled
     out[3] = aw * bw - ax * bx - ay * by - az * bz
 
 
-@numba.guvectorize(["void(float64[:], float64[:], float64[:])"], "(n),(m)->(m)", cache=True)
-def _quat_rotate_kernel(q, v, out):  # pragma: no cover - compiled
-    ux, uy, uz, w = q[0], q[1], q[2], q[3]
+@numba.njit(cache=True, inline="always")
+def _rotate_into(ux, uy, uz, w, v, out):  # pragma: no cover - compiled
     tx = 2.0 * (uy * v[2] - uz * v[1])
     ty = 2.0 * (uz * v[0] - ux * v[2])
     tz = 2.0 * (ux * v[1] - uy * v[0])
@@ -68,29 +65,21 @@ def _quat_rotate_kernel(q, v, out):  # pragma: no cover - compiled
     out[2] = v[2] + w * tz + (ux * ty - uy * tx)
 
 
-@numba.guvectorize(["void(float64[:], float64[:], float64[:])"], "(n),(n)->(n)", cache=True)
-def _quat_inv_mul_kernel(a, b, out):  # pragma: no cover - compiled
-    ax, ay, az, aw = -a[0], -a[1], -a[2], a[3]
-    bx, by, bz, bw = b[0], b[1], b[2], b[3]
-    out[0] = aw * bx + ax * bw + ay * bz - az * by
-    out[1] = aw * by - ax * bz + ay * bw + az * bx
-    out[2] = aw * bz + ax * by - ay * bx + az * bw
-    out[3] = aw * bw - ax * bx - ay * by - az * bz
+@numba.njit(cache=True)
+def _rows_kernel(kind, a, b, out):  # pragma: no cover - compiled
+    """Row by row: 0 a*b, 1 inv(a)*b, 2 rotate b by a, 3 rotate b by inv(a)."""
+    sign = -1.0 if kind == 1 or kind == 3 else 1.0
+    for i in range(a.shape[0]):
+        x, y, z, w = sign * a[i, 0], sign * a[i, 1], sign * a[i, 2], a[i, 3]
+        if kind < 2:
+            _mul_into(x, y, z, w, b[i], out[i])
+        else:
+            _rotate_into(x, y, z, w, b[i], out[i])
 
 
-@numba.guvectorize(["void(float64[:], float64[:], float64[:])"], "(n),(m)->(m)", cache=True)
-def _quat_inv_rotate_kernel(q, v, out):  # pragma: no cover - compiled
-    ux, uy, uz, w = -q[0], -q[1], -q[2], q[3]
-    tx = 2.0 * (uy * v[2] - uz * v[1])
-    ty = 2.0 * (uz * v[0] - ux * v[2])
-    tz = 2.0 * (ux * v[1] - uy * v[0])
-    out[0] = v[0] + w * tx + (uy * tz - uz * ty)
-    out[1] = v[1] + w * ty + (uz * tx - ux * tz)
-    out[2] = v[2] + w * tz + (ux * ty - uy * tx)
-
-
-@numba.guvectorize(["void(float64[:], float64[:], float64, float64[:])"], "(n),(n),()->(n)", cache=True)
-def _quat_slerp_kernel(a, b, t, out):  # pragma: no cover - compiled
+@numba.njit(cache=True, inline="always")
+def slerp_into(a, b, t, out):  # pragma: no cover - compiled
+    """Slerp of one pair of unit quaternions into ``out`` (for compiled callers)."""
     dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
     sign = 1.0
     if dot < 0.0:
@@ -99,30 +88,48 @@ def _quat_slerp_kernel(a, b, t, out):  # pragma: no cover - compiled
     if dot > 1.0:
         dot = 1.0
     angle = np.arccos(dot)
-    s = np.sin(angle)
-    if s < 1e-9:
+    sin = np.sin(angle)
+    if sin < 1e-9:
         wa = 1.0 - t
         wb = t * sign
     else:
-        wa = np.sin((1.0 - t) * angle) / s
-        wb = sign * np.sin(t * angle) / s
+        wa = np.sin((1.0 - t) * angle) / sin
+        wb = sign * np.sin(t * angle) / sin
     norm = 0.0
     for i in range(4):
         out[i] = wa * a[i] + wb * b[i]
         norm += out[i] * out[i]
-    norm = np.sqrt(norm)
+    norm = np.sqrt(norm) if norm > 0.0 else 1.0
     for i in range(4):
         out[i] /= norm
 
 
+@numba.njit(cache=True)
+def _slerp_kernel(a, b, t, out):  # pragma: no cover - compiled
+    for row in range(a.shape[0]):
+        slerp_into(a[row], b[row], t[row], out[row])
+
+
+def _rows(kind: int, a: np.ndarray, b: np.ndarray, width: int) -> np.ndarray:
+    """Broadcast ``a (..., 4)`` against ``b (..., width)`` and run a row kernel over them."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    lead = np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    rows_a = np.ascontiguousarray(np.broadcast_to(a, lead + (4,))).reshape(-1, 4)
+    rows_b = np.ascontiguousarray(np.broadcast_to(b, lead + (width,))).reshape(-1, width)
+    out = np.empty_like(rows_b)
+    _rows_kernel(kind, rows_a, rows_b, out)
+    return out.reshape(lead + (width,))
+
+
 def quat_inv_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``inverse(a) * b`` for unit quaternions: the rotation from frame ``a`` to ``b``."""
-    return _quat_inv_mul_kernel(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    return _rows(1, a, b, 4)
 
 
 def quat_inv_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors ``v (..., 3)`` by the inverse of unit quaternions ``q (..., 4)``."""
-    return _quat_inv_rotate_kernel(np.asarray(q, dtype=np.float64), np.asarray(v, dtype=np.float64))
+    return _rows(3, q, v, 3)
 
 
 def quat_slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarray:
@@ -130,18 +137,27 @@ def quat_slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarra
 
     a, b : (..., 4) unit quaternions; t : broadcasting with their leading shape
     """
-    return _quat_slerp_kernel(
-        np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64), np.asarray(t, dtype=np.float64)
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    lead = np.broadcast_shapes(a.shape[:-1], b.shape[:-1], t.shape)
+    out = np.empty((int(np.prod(lead)), 4))
+    _slerp_kernel(
+        np.ascontiguousarray(np.broadcast_to(a, lead + (4,))).reshape(-1, 4),
+        np.ascontiguousarray(np.broadcast_to(b, lead + (4,))).reshape(-1, 4),
+        np.ascontiguousarray(np.broadcast_to(t, lead)).reshape(-1),
+        out,
     )
+    return out.reshape(lead + (4,))
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product ``a * b`` (apply ``b`` first, then ``a``), broadcasting.
 
-    A compiled generalised ufunc: ten times faster than NumPy component
-    arithmetic on ``(F, J, 4)`` arrays, whose strided access dominates.
+    Compiled (Numba): ten times faster than NumPy component arithmetic on
+    ``(F, J, 4)`` arrays, whose strided access dominates.
     """
-    return _quat_mul_kernel(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    return _rows(0, a, b, 4)
 
 
 def quat_inv(q: np.ndarray) -> np.ndarray:
@@ -151,7 +167,7 @@ def quat_inv(q: np.ndarray) -> np.ndarray:
 
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)``, broadcasting."""
-    return _quat_rotate_kernel(np.asarray(q, dtype=np.float64), np.asarray(v, dtype=np.float64))
+    return _rows(2, q, v, 3)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -222,6 +238,8 @@ def quat_to_euler(
     flat = q.reshape(-1, 4)
     if len(flat) == 0:
         return np.zeros(lead + (3,))
+    from scipy.spatial.transform import Rotation  # imported here: it costs 0.3 s to load
+
     with warnings.catch_warnings():
         # At gimbal lock scipy warns and zeroes the third angle; the choice
         # below (or the caller's exact reference) settles those frames.

@@ -22,7 +22,7 @@ import numba
 import numpy as np
 
 from ..motion import Motion
-from ..rotations import _cross, quat_mul, quat_normalize, quat_rotate, quat_slerp
+from ..rotations import _cross, quat_mul, quat_normalize, quat_rotate, quat_slerp, slerp_into
 from .subjoints import SubjointHierarchy
 
 __all__ = ["positions_to_motion", "recover_orientations", "quat_between", "quat_slerp", "motion_from_world"]
@@ -87,37 +87,9 @@ def _local_from_world(world_pos, world_rot, parents, local_pos, local_rot):  # p
 @numba.njit(cache=True)
 def _slerp_links(world, first, second, fraction, out, target):  # pragma: no cover - compiled
     """out[:, target[s]] = slerp(world[:, first[s]], world[:, second[s]], fraction[s])."""
-    frames = world.shape[0]
-    for f in range(frames):
+    for f in range(world.shape[0]):
         for s in range(first.shape[0]):
-            a = first[s]
-            b = second[s]
-            t = fraction[s]
-            dot = 0.0
-            for i in range(4):
-                dot += world[f, a, i] * world[f, b, i]
-            sign = 1.0
-            if dot < 0.0:
-                dot = -dot
-                sign = -1.0
-            if dot > 1.0:
-                dot = 1.0
-            angle = np.arccos(dot)
-            sin = np.sin(angle)
-            if sin < 1e-9:
-                wa = 1.0 - t
-                wb = sign * t
-            else:
-                wa = np.sin((1.0 - t) * angle) / sin
-                wb = sign * np.sin(t * angle) / sin
-            norm = 0.0
-            for i in range(4):
-                value = wa * world[f, a, i] + wb * world[f, b, i]
-                out[f, target[s], i] = value
-                norm += value * value
-            norm = np.sqrt(norm)
-            for i in range(4):
-                out[f, target[s], i] /= norm
+            slerp_into(world[f, first[s]], world[f, second[s]], fraction[s], out[f, target[s]])
 
 
 def quat_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
