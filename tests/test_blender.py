@@ -1,0 +1,61 @@
+"""A real client: Blender (the bpy module) imports the rubber BVH we write.
+
+Blender needs its own Python (3.11, numpy < 2), so it runs in a separate process:
+``MOCAP_BPY_PYTHON`` names that interpreter (.ci/run sets one up in .bpy-venv).
+The tests skip, saying so, when there is none.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
+from mocap_exaggerate.pipeline import load_preset, run
+
+from .helpers import ROOT, SAMPLE_DIR
+
+SCRIPT = Path(__file__).parent / "blender" / "read_bvh.py"
+
+
+def blender_python() -> str | None:
+    candidates = [os.environ.get("MOCAP_BPY_PYTHON"), str(ROOT / ".bpy-venv" / "bin" / "python")]
+    for candidate in candidates:
+        if candidate and Path(candidate).exists():
+            check = subprocess.run([candidate, "-c", "import bpy"], capture_output=True, timeout=120)
+            if check.returncode == 0:
+                return candidate
+    return None
+
+
+BPY = blender_python()
+needs_blender = pytest.mark.skipif(
+    BPY is None, reason="no Python with Blender's bpy (set MOCAP_BPY_PYTHON, or run .ci/run which makes .bpy-venv)"
+)
+
+
+@needs_blender
+@pytest.mark.parametrize("clip", ["cmu_09_01_run_daz.bvh", "mocapbank_sit_down_stand_up.bvh"])
+def test_blender_imports_the_rubber_bvh_where_we_computed_it(clip, tmp_path):
+    motion, _ = read_bvh(SAMPLE_DIR / clip)
+    result = run(motion, load_preset("cartoon"))
+    path = tmp_path / clip
+    path.write_bytes(format_bvh(result.motion))
+    frames = [0, motion.num_frames // 2, motion.num_frames - 1]
+    done = subprocess.run([BPY, str(SCRIPT), str(path), *map(str, frames)], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    line = next(l for l in done.stdout.splitlines() if l.startswith("JSON:"))
+    seen = json.loads(line[5:])
+    assert seen["bones"] == result.motion.skeleton.num_joints
+    assert seen["frame_range"][1] - seen["frame_range"][0] + 1 == motion.num_frames
+    names = result.motion.skeleton.names
+    tolerance = 1e-4 * motion.skeleton.height()  # Blender computes in float32
+    for frame in frames:
+        theirs = np.array([seen["positions"][str(frame)][name] for name in names])
+        assert np.max(np.abs(theirs - result.world_positions[frame])) < tolerance, frame
