@@ -6,7 +6,7 @@ setting at fault, so the command line can print it as it is.
 
 from __future__ import annotations
 
-__all__ = ["MocapError", "InputError", "ConfigError"]
+__all__ = ["MocapError", "InputError", "ConfigError", "check_number", "check_flag"]
 
 
 class MocapError(Exception):
@@ -26,3 +26,21 @@ class InputError(MocapError, ValueError):
 
 class ConfigError(MocapError, ValueError):
     """A setting is invalid. The message names the setting."""
+
+
+def check_number(where: str, value: object, low: float, high: float, *, low_open: bool = False) -> None:
+    """Raise a ConfigError naming ``where`` unless ``value`` is a finite number in the range.
+
+    The range is ``[low, high]``, or ``(low, high]`` with ``low_open``.
+    """
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if number and value == value and (low < value if low_open else low <= value) and value <= high:
+        return
+    bracket = "(" if low_open else "["
+    raise ConfigError(f"{where} must be a number in {bracket}{low:g}, {high:g}], got {value!r}")
+
+
+def check_flag(where: str, value: object) -> None:
+    """Raise a ConfigError naming ``where`` unless ``value`` is true or false."""
+    if not isinstance(value, bool):
+        raise ConfigError(f"{where} must be true or false, got {value!r}")

@@ -20,7 +20,7 @@ import numpy as np
 import tomli_w
 
 from . import __version__
-from .errors import ConfigError
+from .errors import ConfigError, check_number
 from .limbs import LIMB_NAMES, find_limbs, limb_joints
 from .motion import Motion
 from .skeleton import Skeleton
@@ -71,10 +71,8 @@ class InputConfig:
     def __post_init__(self) -> None:
         if self.tpose not in _TPOSE_MODES:
             raise ConfigError(f"input.tpose must be one of {', '.join(_TPOSE_MODES)}, got {self.tpose!r}")
-        if self.fps is not None and (
-            not isinstance(self.fps, (int, float)) or isinstance(self.fps, bool) or not 0 < self.fps <= 10000
-        ):
-            raise ConfigError(f"input.fps must be a positive frame rate, got {self.fps!r}")
+        if self.fps is not None:
+            check_number("input.fps", self.fps, 0, 10000, low_open=True)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -138,6 +138,10 @@ def test_toml_round_trip_and_precedence():
         ("[input]\ntpose = 'sometimes'\n", "input.tpose"),
         ("[extrapolate\n", "not valid TOML"),
         ("[extrapolate.weights]\nHips = 'zero'\n", "weights"),
+        ("[correct]\nenabled = 'yes'\n", "correct.enabled must be true or false"),
+        ("[springs]\nblend = 1.5\n", "springs.blend must be a number in [0, 1]"),
+        ("[subjoints]\ngroups = 'arm'\n", "subjoints.groups must be a list"),
+        ("[output]\nskeleton = 'both'\n", "output.skeleton"),
     ],
 )
 def test_bad_config_names_file_and_key(text, words):

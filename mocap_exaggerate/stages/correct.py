@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, check_flag, check_number
 
 __all__ = ["CorrectConfig", "CorrectReport", "correct", "stretch_error"]
 
@@ -51,18 +51,12 @@ class CorrectConfig:
     max_iter: int = 500
 
     def __post_init__(self) -> None:
-        if not _number(self.threshold) or not 0 <= self.threshold <= 10:
-            raise ConfigError(f"correct.threshold must be between 0 and 10, got {self.threshold!r}")
-        if not _number(self.delta) or not 0 < self.delta <= 1:
-            raise ConfigError(f"correct.delta must be in (0, 1], got {self.delta!r}")
-        if not _number(self.max_stretch) or not 1 <= self.max_stretch <= 10:
-            raise ConfigError(f"correct.max_stretch must be between 1 and 10, got {self.max_stretch!r}")
+        check_flag("correct.enabled", self.enabled)
+        check_number("correct.threshold", self.threshold, 0, 10)
+        check_number("correct.delta", self.delta, 0, 1, low_open=True)
+        check_number("correct.max_stretch", self.max_stretch, 1, 10)
         if not isinstance(self.max_iter, int) or isinstance(self.max_iter, bool) or not 1 <= self.max_iter <= 100000:
             raise ConfigError(f"correct.max_iter must be a whole number from 1 to 100000, got {self.max_iter!r}")
-
-
-def _number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from ..errors import ConfigError
+from ..errors import ConfigError, check_flag, check_number
 
 __all__ = ["ExtrapolateConfig", "extrapolate", "parse_duration", "gaussian_average"]
 
@@ -58,12 +58,11 @@ class ExtrapolateConfig:
     weights: tuple[tuple[str, float], ...] = field(default=())
 
     def __post_init__(self) -> None:
+        check_flag("extrapolate.enabled", self.enabled)
         parse_duration(self.sigma, 1.0, what="extrapolate.sigma")
-        if not isinstance(self.omega, (int, float)) or not np.isfinite(self.omega) or not 0 <= self.omega <= 50:
-            raise ConfigError(f"extrapolate.omega must be between 0 and 50, got {self.omega!r}")
+        check_number("extrapolate.omega", self.omega, 0, 50)
         for pattern, weight in self.weights:
-            if not isinstance(weight, (int, float)) or not np.isfinite(weight) or not 0 <= weight <= 10:
-                raise ConfigError(f"extrapolate.weights[{pattern!r}] must be between 0 and 10, got {weight!r}")
+            check_number(f"extrapolate.weights[{pattern!r}]", weight, 0, 10)
 
     def sigma_frames(self, frame_time: float) -> float:
         return parse_duration(self.sigma, frame_time, what="extrapolate.sigma")

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, check_flag, check_number
 
 __all__ = ["SpringConfig", "simulate_springs", "spring_substeps", "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE"]
 
@@ -53,15 +53,11 @@ class SpringConfig:
     blend: float = 0.5
 
     def __post_init__(self) -> None:
-        for name, (low, high) in (
-            ("stiffness", STIFFNESS_RANGE),
-            ("link_stiffness", STIFFNESS_RANGE),
-            ("damping", DAMPING_RANGE),
-            ("blend", (0.0, 1.0)),
-        ):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
-                raise ConfigError(f"springs.{name} must be between {low:g} and {high:g}, got {value!r}")
+        check_flag("springs.enabled", self.enabled)
+        check_number("springs.stiffness", self.stiffness, *STIFFNESS_RANGE)
+        check_number("springs.link_stiffness", self.link_stiffness, *STIFFNESS_RANGE)
+        check_number("springs.damping", self.damping, *DAMPING_RANGE)
+        check_number("springs.blend", self.blend, 0, 1)
         if self.stiffness == 0 and self.damping == 0 and self.blend > 0:
             raise ConfigError("springs: stiffness and damping are both 0, so nothing holds the body; raise one")
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, check_flag
 from ..limbs import find_limbs
 from ..skeleton import POSITION_CHANNELS, Skeleton
 
@@ -64,6 +64,7 @@ class SubjointConfig:
     rigid: tuple[str, ...] = field(default=())
 
     def __post_init__(self) -> None:
+        check_flag("subjoints.enabled", self.enabled)
         if isinstance(self.per_link, bool) or not isinstance(self.per_link, int) or not 1 <= self.per_link <= 32:
             raise ConfigError(f"subjoints.per_link must be a whole number from 1 to 32, got {self.per_link!r}")
         if self.sublink_length is not None:
