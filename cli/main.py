@@ -5,6 +5,7 @@ No algorithm lives here.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import logging
@@ -29,6 +30,7 @@ from mocap_exaggerate.pipeline import (
     resolve_config,
     run,
 )
+from mocap_exaggerate.stages.stretch import parse_stretch
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 from mocap_exaggerate.stages.tpose import detect_rest_frames
 
@@ -55,6 +57,13 @@ def _fail_cleanly(func: Callable) -> Callable:
             raise click.ClickException(f"{where}{error.strerror or error}") from None
 
     return wrapper
+
+
+def _parse_stretches(ctx, param, values: tuple[str, ...]):
+    try:
+        return tuple(parse_stretch(v) for v in values)
+    except MocapError as error:
+        raise click.BadParameter(str(error)) from None
 
 
 def _parse_weights(ctx, param, values: tuple[str, ...]) -> tuple[tuple[str, float], ...]:
@@ -114,6 +123,12 @@ def pipeline_options(func: Callable) -> Callable:
         click.option("--springs/--no-springs", "springs_on", default=None, help="Switch the follow-through on or off."),
         click.option("--skeleton", "skeleton_mode", type=click.Choice(["sub", "original"]), default=None,
                      help="Write the rubber sub-joint skeleton (sub) or the original joints only (original)."),
+        click.option("--stretch", "stretches", multiple=True, callback=_parse_stretches, metavar="SPEC",
+                     help="Squash/stretch a limb along its path: LIMB:START-END:SCALE[:axes=xz][:pivot=end]"
+                          "[:ease_in=0.6,0.2][:ease_out=0.3,0.8][:blend=1][:release=0.1s]; frames or 1.2s. "
+                          "Repeatable; adds to the config's [[stretch]] list."),
+        click.option("--auto-stretch/--no-auto-stretch", "auto_stretch_on", default=None,
+                     help="Find strikes (punches, kicks, throws, leaps) and stretch them by the style's scale."),
         click.option("--tpose", type=click.Choice(["auto", "keep", "drop"]), default=None,
                      help="Leading synthetic rest pose: auto (keep out of filters, unchanged), keep, drop."),
         click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time."),
@@ -125,7 +140,8 @@ def pipeline_options(func: Callable) -> Callable:
 
 def _overrides(p: dict[str, Any]) -> dict[str, Any]:
     table: dict[str, dict[str, Any]] = {
-        "input": {}, "extrapolate": {}, "correct": {}, "subjoints": {}, "springs": {}, "output": {}
+        "input": {}, "extrapolate": {}, "correct": {}, "subjoints": {}, "springs": {}, "output": {},
+        "auto_stretch": {},
     }
     pairs = [
         ("input", "tpose", p["tpose"]), ("input", "fps", p["fps"]),
@@ -140,6 +156,7 @@ def _overrides(p: dict[str, Any]) -> dict[str, Any]:
         ("springs", "link_stiffness", p["link_stiffness"]), ("springs", "damping", p["damping"]),
         ("springs", "blend", p["blend"]),
         ("output", "skeleton", p["skeleton_mode"]),
+        ("auto_stretch", "enabled", p["auto_stretch_on"]),
     ]
     for block, key, value in pairs:
         if value is not None:
@@ -168,6 +185,8 @@ def _config_from_options(p: dict[str, Any]):
             raise UserError(f"{p['config_file']}: no such config file") from None
     preset = p["preset"] or DEFAULT_PRESET
     config = resolve_config(preset, text, _overrides(p), config_source=str(p["config_file"] or "options"))
+    if p["stretches"]:
+        config = dataclasses.replace(config, stretch=config.stretch + p["stretches"])
     return preset, config
 
 
@@ -196,9 +215,14 @@ def cli(verbose: int, quiet: bool) -> None:
               help="Output folder (created if needed), or - to write the BVH to stdout.")
 @click.option("--name", default=None, help="Output file stem (default: the input's; 'stdin' for -).")
 @click.option("--overwrite", is_flag=True, help="Replace outputs that exist already.")
+@click.option("--trails", "trails_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write the original and exaggerated end-effector paths of every stretch as JSON.")
+@click.option("--path-file", "path_file", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Apply hand-edited paths: a --trails file whose 'exaggerated' points you moved.")
 @pipeline_options
 @_fail_cleanly
-def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool, **options) -> None:
+def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool, trails_path: Path | None,
+               path_file: Path | None, **options) -> None:
     """Exaggerate one clip: writes OUT/<name>.bvh and OUT/<name>.json (manifest).
 
     \b
@@ -208,6 +232,8 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
       mocap-exaggerate exaggerate walk.bvh -o out/ --sigma 18f --omega 3 --no-correct
       mocap-exaggerate exaggerate walk.bvh -o out/ --subjoints 6 --blend 0.7 --stiffness 100
       mocap-exaggerate exaggerate walk.bvh -o out/ --skeleton original   # original joint set
+      mocap-exaggerate exaggerate punch.bvh -o out/ --stretch "left_arm:120-160:3:axes=xz:ease_in=0.6,0.2"
+      mocap-exaggerate exaggerate fight.bvh -o out/ --preset looney --auto-stretch -v
       cat walk.bvh | mocap-exaggerate exaggerate - -o - > walk_cartoon.bvh
     """
     preset, config = _config_from_options(options)
@@ -230,9 +256,15 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
     for warning in report.warnings:
         log.warning("%s: %s", label, warning)
 
-    result = run(motion, config)
+    paths = _read_path_file(path_file) if path_file else None
+    result = run(motion, config, paths=paths)
     for note in result.notes:
         log.info("%s: %s", label, note)
+    if trails_path is not None:
+        if trails_path.exists() and not overwrite:
+            raise UserError(f"{trails_path} exists; pass --overwrite to replace it")
+        trails = {"input": label, "fps": motion.fps, "trails": result.stretch.trails if result.stretch else []}
+        atomic_write(trails_path, (json.dumps(trails, indent=1) + "\n").encode("utf-8"), overwrite=True)
 
     started = time.perf_counter()
     bvh_bytes = format_bvh(result.motion)
@@ -277,6 +309,31 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
             f"{total:.2f} s",
             err=True,
         )
+
+
+def _read_path_file(path: Path) -> dict:
+    """Edited paths from a trails JSON file: limb -> (frames, positions)."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise UserError(f"{path}: no such path file") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise UserError(f"{path}: not a JSON trails file ({error})") from None
+    paths = {}
+    for number, trail in enumerate(data.get("trails", []) if isinstance(data, dict) else [], start=1):
+        try:
+            frames = [int(f) for f in trail["frames"]]
+            points = np.asarray(trail["exaggerated"], dtype=np.float64)
+            limb = str(trail["limb"])
+        except (KeyError, TypeError, ValueError):
+            raise UserError(f"{path}: trail #{number} needs limb, frames and exaggerated points") from None
+        if points.shape != (len(frames), 3) or not np.all(np.isfinite(points)):
+            raise UserError(f"{path}: trail #{number} ({limb}) has {len(frames)} frames but points of shape "
+                            f"{points.shape}; expected one finite x, y, z per frame")
+        paths[limb] = (frames, points)
+    if not paths:
+        raise UserError(f"{path}: no trails in it")
+    return paths
 
 
 def _quiet() -> bool:

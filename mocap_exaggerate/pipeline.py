@@ -28,6 +28,7 @@ from .stages.correct import CorrectConfig, CorrectReport, correct
 from .stages.extrapolate import ExtrapolateConfig, extrapolate
 from .stages.orient import motion_from_world, recover_orientations
 from .stages.springs import SpringConfig, simulate_springs, spring_substeps
+from .stages.stretch import AutoStretchConfig, StretchResult, StretchSpec, apply_stretches, find_strikes
 from .stages.subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints
 from .stages.tpose import detect_rest_frames
 
@@ -43,6 +44,7 @@ __all__ = [
     "resolve_weights",
     "run",
     "exaggerate",
+    "pipeline_limbs",
     "STAGES",
 ]
 
@@ -50,7 +52,7 @@ log = logging.getLogger(__name__)
 
 DEFAULT_PRESET = "cartoon"
 #: Blocks in the order they run.
-STAGES = ("extrapolate", "correct", "subjoints", "springs")
+STAGES = ("extrapolate", "correct", "stretch", "subjoints", "springs")
 _TPOSE_MODES = ("auto", "keep", "drop")
 _SKELETON_MODES = ("sub", "original")
 
@@ -95,6 +97,7 @@ _BLOCKS = {
     "input": InputConfig,
     "extrapolate": ExtrapolateConfig,
     "correct": CorrectConfig,
+    "auto_stretch": AutoStretchConfig,
     "subjoints": SubjointConfig,
     "springs": SpringConfig,
     "output": OutputConfig,
@@ -111,6 +114,9 @@ class PipelineConfig:
     subjoints: SubjointConfig = field(default_factory=SubjointConfig)
     springs: SpringConfig = field(default_factory=SpringConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
+    auto_stretch: AutoStretchConfig = field(default_factory=AutoStretchConfig)
+    stretch: tuple[StretchSpec, ...] = ()
+    limbs: tuple[tuple[str, tuple[str, ...]], ...] = ()
     description: str = ""
 
     @classmethod
@@ -125,8 +131,15 @@ class PipelineConfig:
                     raise ConfigError(f"{source}: description must be text")
                 blocks["description"] = value
                 continue
+            if key == "stretch":
+                blocks["stretch"] = _stretch_from_list(value, source)
+                continue
+            if key == "limbs":
+                blocks["limbs"] = _limbs_from_table(value, source)
+                continue
             if key not in _BLOCKS:
-                raise ConfigError(f"{source}: unknown block [{key}] (known: {', '.join(_BLOCKS)})")
+                known = ", ".join(list(_BLOCKS) + ["limbs", "[stretch]"])
+                raise ConfigError(f"{source}: unknown block [{key}] (known: {known})")
             if not isinstance(value, dict):
                 raise ConfigError(f"{source}: [{key}] must be a table")
             block_type = _BLOCKS[key]
@@ -168,6 +181,10 @@ class PipelineConfig:
                 table["groups"] = [list(g) for g in self.subjoints.groups]
                 table["rigid"] = list(self.subjoints.rigid)
             out[name] = {k: v for k, v in table.items() if v is not None}
+        if self.limbs:
+            out["limbs"] = {name: list(chain) for name, chain in self.limbs}
+        if self.stretch:
+            out["stretch"] = [spec.to_dict() for spec in self.stretch]
         return out
 
     @classmethod
@@ -180,6 +197,42 @@ class PipelineConfig:
 
     def to_toml(self) -> str:
         return tomli_w.dumps(self.to_dict())
+
+
+def _stretch_from_list(items: Any, source: str) -> tuple[StretchSpec, ...]:
+    if not isinstance(items, (list, tuple)):
+        raise ConfigError(f"{source}: stretch must be a list of tables ([[stretch]])")
+    specs = []
+    known = {f.name for f in fields(StretchSpec)}
+    for number, item in enumerate(items, start=1):
+        if not isinstance(item, dict):
+            raise ConfigError(f"{source}: stretch #{number} must be a table")
+        unknown = set(item) - known
+        if unknown:
+            raise ConfigError(f"{source}: stretch #{number}: unknown key {sorted(unknown)[0]} (known: {', '.join(sorted(known))})")
+        missing = {"limb", "start", "end", "scale"} - set(item)
+        if missing:
+            raise ConfigError(f"{source}: stretch #{number}: missing {', '.join(sorted(missing))}")
+        values = dict(item)
+        for ease in ("ease_in", "ease_out"):
+            if isinstance(values.get(ease), list):
+                values[ease] = tuple(values[ease])
+        try:
+            specs.append(StretchSpec(**values))
+        except ConfigError as error:
+            raise ConfigError(f"{source}: stretch #{number}: {error}") from None
+    return tuple(specs)
+
+
+def _limbs_from_table(table: Any, source: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    if not isinstance(table, dict):
+        raise ConfigError(f"{source}: [limbs] must be a table of name = [joints]")
+    out = []
+    for name, chain in table.items():
+        if not isinstance(chain, (list, tuple)) or len(chain) < 2 or not all(isinstance(n, str) for n in chain):
+            raise ConfigError(f"{source}: limbs.{name} must list at least two joint names, base first")
+        out.append((str(name), tuple(chain)))
+    return tuple(out)
 
 
 def _weights_from_table(table: Any, source: str) -> tuple[tuple[str, float], ...]:
@@ -256,16 +309,23 @@ def resolve_config(
 # ---------------------------------------------------------------------------- running
 
 
-def resolve_weights(skeleton: Skeleton, weights: tuple[tuple[str, float], ...]) -> np.ndarray:
+def pipeline_limbs(skeleton: Skeleton, config: PipelineConfig) -> dict:
+    """Limbs found on ``skeleton``, with the config's ``[limbs]`` winning."""
+    try:
+        return find_limbs(skeleton, {name: list(chain) for name, chain in config.limbs})
+    except (KeyError, ValueError) as error:
+        raise ConfigError(f"limbs: {error.args[0]}") from None
+
+
+def resolve_weights(skeleton: Skeleton, weights: tuple[tuple[str, float], ...], limbs: dict | None = None) -> np.ndarray:
     """Per-joint weights ``(J,)`` from ``(pattern, weight)`` pairs; later pairs win.
 
     A pattern is a limb name (its joints and everything below its end), an
     exact joint name, or a shell pattern over joint names.
     """
     out = np.ones(skeleton.num_joints)
-    limbs = None
     for pattern, weight in weights:
-        if pattern in LIMB_NAMES:
+        if pattern in LIMB_NAMES or (limbs and pattern in limbs):
             limbs = find_limbs(skeleton) if limbs is None else limbs
             if pattern not in limbs:
                 raise ConfigError(f"weight {pattern}={weight:g}: no {pattern} found on this skeleton")
@@ -310,10 +370,15 @@ class PipelineResult:
     max_link_stretch: float = 1.0
     substeps: int = 0
     notes: list[str] = field(default_factory=list)
+    stretch: StretchResult | None = None
 
 
-def run(motion: Motion, config: PipelineConfig | None = None) -> PipelineResult:
-    """Run the blocks that are switched on over a whole clip."""
+def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | None = None) -> PipelineResult:
+    """Run the blocks that are switched on over a whole clip.
+
+    ``paths`` maps limb names to hand-edited end-effector paths ``(frames,
+    positions)`` (a trails file): the limb follows them (see `apply_stretches`).
+    """
     config = config or PipelineConfig()
     timings: dict[str, float] = {}
     notes: list[str] = []
@@ -334,9 +399,10 @@ def run(motion: Motion, config: PipelineConfig | None = None) -> PipelineResult:
     body = world[first:]
     skeleton = motion.skeleton
 
+    limbs = pipeline_limbs(skeleton, config)
     if config.extrapolate.enabled:
         start = time.perf_counter()
-        weights = resolve_weights(skeleton, config.extrapolate.weights)
+        weights = resolve_weights(skeleton, config.extrapolate.weights, limbs)
         body = extrapolate(
             body,
             sigma=config.extrapolate.sigma_frames(motion.frame_time),
@@ -360,6 +426,26 @@ def run(motion: Motion, config: PipelineConfig | None = None) -> PipelineResult:
         if report.unconverged_frames:
             notes.append(f"correction stopped at max_iter with {report.unconverged_frames} frame(s) above threshold")
         timings["correct"] = time.perf_counter() - start
+
+    stretch_result = None
+    specs = list(config.stretch)
+    if config.auto_stretch.enabled:
+        # Strikes are found in the captured motion, not in its exaggeration.
+        found = find_strikes(world[first:], skeleton, limbs, motion.frame_time, config.auto_stretch)
+        found = [s.shifted(first) for s in found]
+        for spec in found:
+            notes.append(f"auto-stretch: {spec.limb} frames {spec.start}-{spec.end} x{spec.scale:g}")
+        for spec in found:  # the user's own events win over found ones
+            if not _overlaps(spec, specs, motion.frame_time, motion.num_frames):
+                specs.append(spec)
+    if specs or paths:
+        start = time.perf_counter()
+        specs += _specs_for_paths(paths, specs, motion.frame_time, motion.num_frames)
+        whole = world.copy()
+        whole[first:] = body
+        stretch_result = apply_stretches(whole, skeleton, limbs, tuple(specs), motion.frame_time, paths=paths)
+        body = stretch_result.positions[first:]
+        timings["stretch"] = time.perf_counter() - start
 
     positions = world.copy()
     positions[first:] = body
@@ -408,8 +494,29 @@ def run(motion: Motion, config: PipelineConfig | None = None) -> PipelineResult:
 
     return PipelineResult(
         out, out_pos, out_rot, original_index, hierarchy if config.subjoints.enabled else None,
-        rest, dropped, timings, report, stretch, substeps, notes,
+        rest, dropped, timings, report, stretch, substeps, notes, stretch_result,
     )
+
+
+def _overlaps(spec: StretchSpec, others: list[StretchSpec], frame_time: float, frames: int) -> bool:
+    first, last = spec.span(frame_time, frames)
+    for other in others:
+        if other.limb == spec.limb:
+            a, b = other.span(frame_time, frames)
+            if first <= b and a <= last:
+                return True
+    return False
+
+
+def _specs_for_paths(paths: dict | None, specs: list[StretchSpec], frame_time: float, frames: int) -> list[StretchSpec]:
+    """Events (scale 1, no release) for edited paths that no stretch already covers."""
+    extra = []
+    for limb, (edit_frames, _) in (paths or {}).items():
+        covered = any(s.limb == limb for s in specs)
+        if not covered and len(edit_frames) >= 2:
+            extra.append(StretchSpec(limb=limb, start=int(min(edit_frames)), end=int(max(edit_frames)), scale=1.0,
+                                     release=0))
+    return extra
 
 
 def _max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.ndarray) -> float:
@@ -464,7 +571,7 @@ def manifest(
         "input": {"file": input_name, "hash": file_digest(input_bytes), "frames": frames_in, "fps": fps},
         "preset": preset,
         "config": config.to_dict(),
-        "stages": [s for s in STAGES if getattr(config, s).enabled and not (s == "springs" and config.springs.blend == 0)],
+        "stages": [s for s in STAGES if s in result.timings and (s != "subjoints" or config.subjoints.enabled)],
         "rest_frames": {"count": result.rest_frames, "dropped": result.rest_frames_dropped},
         "outputs": outputs,
         "result": {
@@ -482,6 +589,8 @@ def manifest(
         info["result"]["groups"] = [[names[result.hierarchy.original[j]] for j in chain] for chain in result.hierarchy.groups]
     if result.substeps:
         info["result"]["spring_substeps"] = result.substeps
+    if result.stretch is not None:
+        info["result"]["stretch"] = result.stretch.events
     if result.correct_report is not None:
         info["result"]["correct"] = {
             k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(result.correct_report).items()

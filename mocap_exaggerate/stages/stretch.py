@@ -1,0 +1,495 @@
+"""Squash and stretch along motion paths (Ibrahim 2018, the Stretch-Engine, section 4.3).
+
+For a limb (base joint to end effector), a frame range and a scale S, the end
+effector's path over the range is scaled about its origin O (the first point,
+or the last with ``pivot = "end"``): ``O + S (P - O)`` on the chosen axes. The
+thesis then looks for the point P2 on the line from the path's final point P1
+to its scaled image P3 at which the limb is exactly S times as long as at P1
+(a line-sphere intersection here; the thesis uses the law of sines), which
+gives the effective scale S'. The original and S'-scaled paths are blended
+with the arc-length ratio from the origin, passed through an ease curve, and
+the limb follows the new path: the chain turns toward the new end and
+stretches along its own axis, the hand or foot riding along.
+
+Beyond the thesis: a ``release`` after the range (before it, with the pivot
+at the end) lets the limb ease back instead of snapping to its captured
+length on the next frame.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from ..errors import ConfigError, check_number
+from ..rotations import quat_rotate
+from .orient import quat_between
+from .extrapolate import parse_duration
+
+__all__ = [
+    "StretchSpec",
+    "StretchResult",
+    "parse_stretch",
+    "ease_curve",
+    "solve_effective_scale",
+    "exaggerated_path",
+    "apply_stretches",
+    "MAX_SCALE",
+    "AutoStretchConfig",
+    "find_strikes",
+]
+
+#: The thesis's range of scale: 0 (fully squashed) to 5 (the extreme, a character pulled by a rocket).
+MAX_SCALE = 5.0
+_AXES = "xyz"
+
+
+@dataclass(frozen=True, kw_only=True)
+class StretchSpec:
+    """One squash-and-stretch event.
+
+    limb : limb name (``left_arm``, ``right_leg``, ``spine``, ``neck`` or one
+        declared in ``[limbs]``)
+    start, end : frame range, inclusive: frame numbers, or durations such as
+        ``"1.2s"`` (converted with the clip's frame time)
+    scale : S in [0, 5]: the limb's length at the final frame becomes S times
+        its length there
+    axes : which of x, y, z the path is scaled on
+    pivot : ``start`` scales away from the first frame (the limb is longest
+        at the last); ``end`` scales from the last frame (longest at the first)
+    blend : share of the change applied, 0 (none) to 1
+    ease_in : (percent, value), percent in [0, 1], value in [0, 0.5], or None
+    ease_out : (percent, value), percent in [0, 1], value in [0.5, 1], or None
+    release : how long the limb takes to return to its captured length after
+        the range (before it with ``pivot = "end"``); 0 snaps back as in the thesis
+    """
+
+    limb: str
+    start: int | str
+    end: int | str
+    scale: float
+    axes: str = "xyz"
+    pivot: str = "start"
+    blend: float = 1.0
+    ease_in: tuple[float, float] | None = None
+    ease_out: tuple[float, float] | None = None
+    release: str | float = "0.1s"
+
+    def __post_init__(self) -> None:
+        where = f"stretch {self.limb}"
+        check_number(f"{where}: scale", self.scale, 0, MAX_SCALE)
+        check_number(f"{where}: blend", self.blend, 0, 1)
+        axes = str(self.axes).lower()
+        if not axes or any(a not in _AXES for a in axes) or len(set(axes)) != len(axes):
+            raise ConfigError(f"{where}: axes must be some of x, y, z, got {self.axes!r}")
+        object.__setattr__(self, "axes", "".join(a for a in _AXES if a in axes))
+        if self.pivot not in ("start", "end"):
+            raise ConfigError(f"{where}: pivot must be start or end, got {self.pivot!r}")
+        for name, (low, high) in (("ease_in", (0.0, 0.5)), ("ease_out", (0.5, 1.0))):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            if not isinstance(value, (tuple, list)) or len(value) != 2:
+                raise ConfigError(f"{where}: {name} must be percent,value, got {value!r}")
+            check_number(f"{where}: {name} percent", value[0], 0, 1)
+            check_number(f"{where}: {name} value", value[1], low, high)
+            object.__setattr__(self, name, (float(value[0]), float(value[1])))
+        if self.ease_in and self.ease_out and self.ease_in[0] >= 1 - self.ease_out[0]:
+            raise ConfigError(
+                f"{where}: ease_in percent {self.ease_in[0]:g} must come before the ease_out point "
+                f"(1 - {self.ease_out[0]:g}); lower one of them"
+            )
+        parse_duration(self.release, 1.0, what=f"{where}: release")
+
+    def frames(self, frame_time: float, num_frames: int) -> tuple[int, int]:
+        """The inclusive frame range, validated against the clip."""
+        first = _frame(self.start, frame_time, f"stretch {self.limb}: start")
+        last = _frame(self.end, frame_time, f"stretch {self.limb}: end")
+        if not 0 <= first < last < num_frames:
+            raise ConfigError(
+                f"stretch {self.limb}: frames {first}-{last} must lie within 0-{num_frames - 1} with start < end"
+            )
+        return first, last
+
+    def span(self, frame_time: float, num_frames: int) -> tuple[int, int]:
+        """Frames the event touches, release included (inclusive)."""
+        first, last = self.frames(frame_time, num_frames)
+        release = int(round(parse_duration(self.release, frame_time, what=f"stretch {self.limb}: release")))
+        lo = first - release if self.pivot == "end" else first
+        hi = last + release if self.pivot == "start" else last
+        return max(lo, 0), min(hi, num_frames - 1)
+
+    def shifted(self, frames: int) -> StretchSpec:
+        """The same event ``frames`` later (frame-number ranges only)."""
+        return replace(self, start=int(self.start) + frames, end=int(self.end) + frames)
+
+    def to_dict(self) -> dict:
+        out = {"limb": self.limb, "start": self.start, "end": self.end, "scale": float(self.scale),
+               "axes": self.axes, "pivot": self.pivot, "blend": float(self.blend), "release": self.release}
+        if self.ease_in:
+            out["ease_in"] = list(self.ease_in)
+        if self.ease_out:
+            out["ease_out"] = list(self.ease_out)
+        return out
+
+
+def _frame(value: int | str, frame_time: float, what: str) -> int:
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        return int(value)
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    text = str(value).strip()
+    if re.fullmatch(r"\d+", text):
+        return int(text)
+    return int(round(parse_duration(text, frame_time, what=what)))
+
+
+_SPEC = re.compile(r"^\s*([A-Za-z_][\w.-]*)\s*:\s*([^:]+?)\s*-\s*([^:]+?)\s*:\s*([0-9.]+)\s*((?::[^:]+)*)$")
+
+
+def parse_stretch(text: str) -> StretchSpec:
+    """A spec from the command line: ``LIMB:START-END:SCALE[:key=value...]``.
+
+    >>> parse_stretch("left_arm:120-160:3:axes=xz:ease_in=0.6,0.2").axes
+    'xz'
+    """
+    match = _SPEC.match(text)
+    if not match:
+        raise ConfigError(f"--stretch {text!r}: expected LIMB:START-END:SCALE[:key=value...], e.g. left_arm:120-160:3")
+    limb, start, end, scale, rest = match.groups()
+    options: dict = {}
+    for item in filter(None, rest.split(":")):
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep:
+            raise ConfigError(f"--stretch {text!r}: {item!r} is not key=value")
+        if key in ("ease_in", "ease_out"):
+            parts = value.split(",")
+            if len(parts) != 2:
+                raise ConfigError(f"--stretch {text!r}: {key} takes percent,value (e.g. {key}=0.6,0.2)")
+            options[key] = tuple(_number(p, text, key) for p in parts)
+        elif key in ("blend",):
+            options[key] = _number(value, text, key)
+        elif key in ("axes", "pivot", "release"):
+            options[key] = value.strip()
+        else:
+            raise ConfigError(f"--stretch {text!r}: unknown key {key!r} (axes, pivot, blend, ease_in, ease_out, release)")
+    return StretchSpec(limb=limb, start=start, end=end, scale=_number(scale, text, "scale"), **options)
+
+
+def _number(text: str, spec: str, key: str) -> float:
+    text = text.strip()
+    try:
+        return float(text[:-1]) / 100.0 if text.endswith("%") else float(text)
+    except ValueError:
+        raise ConfigError(f"--stretch {spec!r}: {key} {text!r} is not a number") from None
+
+
+def ease_curve(ease_in: tuple[float, float] | None = None, ease_out: tuple[float, float] | None = None):
+    """The remap curve r -> eased r on [0, 1]: monotone, through (0, 0) and (1, 1).
+
+    The ease-in point sits at ``(percent, value)``, the ease-out point at
+    ``(1 - percent, value)`` (its percent counts from the end); a monotone
+    cubic (PCHIP) runs through the points. Without ease points it is the
+    identity (the thesis's linear scale).
+    """
+    xs, ys = [0.0], [0.0]
+    if ease_in:
+        xs.append(ease_in[0])
+        ys.append(ease_in[1])
+    if ease_out:
+        xs.append(1.0 - ease_out[0])
+        ys.append(ease_out[1])
+    xs.append(1.0)
+    ys.append(1.0)
+    keep = np.concatenate([[True], np.diff(xs) > 1e-9])
+    xs, ys = np.array(xs)[keep], np.array(ys)[keep]
+    if len(xs) == 2:
+        return lambda r: np.clip(np.asarray(r, dtype=np.float64), 0.0, 1.0)
+    spline = PchipInterpolator(xs, ys)
+    return lambda r: np.clip(spline(np.clip(np.asarray(r, dtype=np.float64), 0.0, 1.0)), 0.0, 1.0)
+
+
+def solve_effective_scale(base: np.ndarray, origin: np.ndarray, final: np.ndarray, scale: float, mask: np.ndarray):
+    """The effective scale S' and the new final point P2.
+
+    base : (3,) base joint P0 at the final frame; origin : (3,) path origin O;
+    final : (3,) the path's final point P1; mask : (3,) bool, scaled axes.
+
+    P2 = P1 + t (P3 - P1) with P3 the fully scaled final point, and t the
+    intersection of that line with the sphere ``|P2 - P0| = S |P1 - P0|``
+    nearest t = 0 (for S > 1 with a scaled-up path this is the thesis's P2,
+    on or past P3). Then ``S' = 1 + t (S - 1)`` on the masked axes ends the
+    scaled path exactly at P2. A squash (S < 1) on axes along which the end
+    cannot come that close to the base has no intersection: the closest
+    point is taken and ``exact`` is False.
+
+    Returns (S', P2, exact).
+    """
+    length = np.linalg.norm(final - base)
+    direction = np.where(mask, (scale - 1.0) * (final - origin), 0.0)  # P3 - P1
+    if scale == 1.0 or length == 0.0:
+        return 1.0, final.copy(), scale == 1.0
+    a = float(direction @ direction)
+    offset = final - base
+    if a < 1e-24:
+        return 1.0, final.copy(), False
+    b = 2.0 * float(offset @ direction)
+    c = float(offset @ offset) - (scale * length) ** 2
+    disc = b * b - 4 * a * c
+    if disc >= 0:
+        # Of the two intersections take the nearer one: the smallest change to the path.
+        root = np.sqrt(disc)
+        t = min((-b - root) / (2 * a), (-b + root) / (2 * a), key=abs)
+        return 1.0 + t * (scale - 1.0), final + t * direction, True
+    t = -b / (2 * a)  # the line never comes that close to the base: take its closest point
+    return 1.0 + t * (scale - 1.0), final + t * direction, False
+
+
+def exaggerated_path(path: np.ndarray, base_at_final: np.ndarray, spec: StretchSpec):
+    """The new end-effector path over the range, ``(n, 3)``, in frame order.
+
+    path : (n, 3) end-effector positions over the range, in frame order
+    base_at_final : (3,) base joint at the final frame (the last, or the first with pivot end)
+    Returns (new_path, effective_scale, exact).
+    """
+    ordered = path[::-1] if spec.pivot == "end" else path
+    origin, final = ordered[0], ordered[-1]
+    mask = np.array([a in spec.axes for a in _AXES])
+    effective, _, exact = solve_effective_scale(base_at_final, origin, final, spec.scale, mask)
+    scaled = np.where(mask, origin + effective * (ordered - origin), ordered)
+    steps = np.linalg.norm(np.diff(ordered, axis=0), axis=1)
+    along = np.concatenate([[0.0], np.cumsum(steps)])
+    ratio = along / along[-1] if along[-1] > 0 else np.linspace(0.0, 1.0, len(ordered))
+    weight = spec.blend * ease_curve(spec.ease_in, spec.ease_out)(ratio)
+    new = (1.0 - weight)[:, None] * ordered + weight[:, None] * scaled
+    return (new[::-1] if spec.pivot == "end" else new), effective, exact
+
+
+@dataclass
+class StretchResult:
+    """What the stretch pass did.
+
+    positions : (F, J, 3) float64 world positions after all stretches
+    stretch_factors : (F, J) float64, each link's length over its length before
+        the pass (1 where untouched): the glTF writer turns it into thickness
+    events : one dict per stretch (limb, frames, scale, effective scale, exact)
+    trails : per event, frames and the original and new end-effector paths
+    """
+
+    positions: np.ndarray
+    stretch_factors: np.ndarray
+    events: list[dict] = field(default_factory=list)
+    trails: list[dict] = field(default_factory=list)
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def apply_stretches(
+    world_pos: np.ndarray,
+    skeleton,
+    limbs: dict,
+    specs: tuple[StretchSpec, ...],
+    frame_time: float,
+    *,
+    paths: dict | None = None,
+) -> StretchResult:
+    """Apply every stretch spec to ``world_pos (F, J, 3)``; returns a StretchResult.
+
+    ``limbs`` maps limb names to `Limb`s (``find_limbs``). ``paths`` maps a
+    limb name to ``(frames, positions)`` edited by hand (a trails file): that
+    path replaces the computed one for the event on that limb covering those frames.
+    """
+    world_pos = np.array(world_pos, dtype=np.float64)
+    frames_total = world_pos.shape[0]
+    before = world_pos.copy()
+    taken: dict[str, list[tuple[int, int, StretchSpec]]] = {}
+    plans = []
+    for spec in specs:
+        if spec.limb not in limbs:
+            known = ", ".join(limbs) or "none found"
+            raise ConfigError(f"stretch {spec.limb}: no such limb on this skeleton (limbs: {known})")
+        first, last = spec.frames(frame_time, frames_total)
+        lo, hi = spec.span(frame_time, frames_total)
+        for other_lo, other_hi, other in taken.get(spec.limb, []):
+            if lo <= other_hi and other_lo <= hi:
+                raise ConfigError(
+                    f"stretch {spec.limb}: frames {first}-{last} overlap {other.start}-{other.end} "
+                    f"on the same limb (release included); split or merge them"
+                )
+        taken.setdefault(spec.limb, []).append((lo, hi, spec))
+        plans.append((spec, first, last, lo, hi))
+
+    events, trails = [], []
+    for spec, first, last, lo, hi in plans:
+        limb = limbs[spec.limb]
+        base, end = limb.base, limb.end
+        path = world_pos[first : last + 1, end]
+        final_frame = first if spec.pivot == "end" else last
+        new_path, effective, exact = exaggerated_path(path, world_pos[final_frame, base], spec)
+        edited = (paths or {}).get(spec.limb)
+        if edited is not None:
+            edit_frames, edit_pos = edited
+            index = np.asarray(edit_frames) - first
+            inside = (index >= 0) & (index < len(new_path))
+            new_path[index[inside]] = np.asarray(edit_pos, dtype=np.float64)[inside]
+        target = world_pos[:, end].copy()
+        target[first : last + 1] = new_path
+        # Release: the displacement at the final frame fades out smoothly.
+        if spec.pivot == "start" and hi > last:
+            fade = 1.0 - _smoothstep((np.arange(last + 1, hi + 1) - last) / (hi - last + 1))
+            target[last + 1 : hi + 1] += fade[:, None] * (new_path[-1] - world_pos[last, end])
+        if spec.pivot == "end" and lo < first:
+            fade = _smoothstep((np.arange(lo, first) - lo + 1) / (first - lo + 1))
+            target[lo:first] += fade[:, None] * (new_path[0] - world_pos[first, end])
+        span = slice(lo, hi + 1)
+        _follow(world_pos, skeleton, limb, target, span)
+        events.append({
+            "limb": spec.limb, "frames": [first, last], "scale": float(spec.scale), "axes": spec.axes,
+            "pivot": spec.pivot, "effective_scale": round(float(effective), 6), "exact": bool(exact),
+        })
+        trails.append({
+            "limb": spec.limb, "joint": skeleton.names[end], "frames": list(range(lo, hi + 1)),
+            "original": before[span, end].round(6).tolist(), "exaggerated": world_pos[span, end].round(6).tolist(),
+        })
+
+    lengths_before = np.linalg.norm(before[:, 1:] - before[:, skeleton.parents[1:]], axis=-1)
+    lengths_after = np.linalg.norm(world_pos[:, 1:] - world_pos[:, skeleton.parents[1:]], axis=-1)
+    factors = np.ones((frames_total, skeleton.num_joints))
+    factors[:, 1:] = np.divide(lengths_after, lengths_before, out=np.ones_like(lengths_after),
+                               where=lengths_before > 1e-12)
+    return StretchResult(world_pos, factors, events, trails)
+
+
+def _follow(world_pos: np.ndarray, skeleton, limb, target: np.ndarray, span: slice) -> None:
+    """Turn and stretch the limb chain (in place) so its end reaches ``target`` over ``span``.
+
+    The chain turns about its base by the smallest rotation from the old
+    base-to-end direction to the new one, and stretches along that axis only
+    (an elbow's sideways offset is kept). Everything else below the base (the
+    hand and fingers, the arms off a stretched spine, twist bones) rides
+    rigidly with its nearest chain joint.
+    """
+    chain = list(limb.joints)
+    base, end = chain[0], chain[-1]
+    pos = world_pos[span]
+    origin = pos[:, base]
+    old = pos[:, end] - origin
+    new = target[span] - origin
+    old_len = np.linalg.norm(old, axis=-1)
+    new_len = np.linalg.norm(new, axis=-1)
+    turn = quat_between(old, new)
+    stretch = np.divide(new_len, old_len, out=np.ones_like(old_len), where=old_len > 1e-12)
+    axis = np.divide(old, old_len[:, None], out=np.zeros_like(old), where=old_len[:, None] > 1e-12)
+    offset = pos[:, chain] - origin[:, None]
+    along = np.sum(offset * axis[:, None], axis=-1, keepdims=True)
+    offset = offset + (stretch[:, None, None] - 1.0) * along * axis[:, None]
+    new_chain = origin[:, None] + quat_rotate(turn[:, None], offset)
+    riders = [int(j) for j in skeleton.descendants(base)[1:] if j not in chain]
+    if riders:
+        in_chain = {j: k for k, j in enumerate(chain)}
+        anchor = []
+        for j in riders:
+            up = int(skeleton.parents[j])
+            while up not in in_chain:
+                up = int(skeleton.parents[up])
+            anchor.append(in_chain[up])
+        anchor = np.array(anchor)
+        rel = pos[:, riders] - pos[:, np.array(chain)[anchor]]
+        pos[:, riders] = new_chain[:, anchor] + quat_rotate(turn[:, None], rel)
+    pos[:, chain] = new_chain
+    world_pos[span] = pos
+
+
+@dataclass(frozen=True, kw_only=True)
+class AutoStretchConfig:
+    """Automatic stretch events: strikes found in the motion get the style's scale.
+
+    A strike is a punch, kick, throw or leap: an arm or leg end effector that
+    speeds up (relative to the body) to a peak of at least ``min_speed`` limb
+    lengths per second and ``speed_factor`` times its median speed, and then
+    reaches out to at least ``min_reach`` of the limb's full length, having
+    straightened by at least ``min_extension`` of it on the way. The
+    event runs from where the speed first rises past half its peak to the
+    frame of greatest reach; its scale is the style's ``arm`` or ``leg``.
+
+    arm, leg, spine, neck : the style's range of scale per limb (the
+        thesis: limbs about 2, torso at most the limbs, 5 the extreme)
+    """
+
+    enabled: bool = False
+    arm: float = 2.0
+    leg: float = 2.0
+    spine: float = 1.5
+    neck: float = 1.5
+    min_speed: float = 5.0
+    speed_factor: float = 3.0
+    min_reach: float = 0.85
+    min_extension: float = 0.15
+    axes: str = "xyz"
+    ease_in: tuple[float, float] | None = (0.5, 0.25)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ConfigError(f"auto_stretch.enabled must be true or false, got {self.enabled!r}")
+        for name in ("arm", "leg", "spine", "neck"):
+            check_number(f"auto_stretch.{name}", getattr(self, name), 0, MAX_SCALE)
+        check_number("auto_stretch.min_speed", self.min_speed, 0, 100)
+        check_number("auto_stretch.speed_factor", self.speed_factor, 1, 100)
+        check_number("auto_stretch.min_reach", self.min_reach, 0, 1)
+        check_number("auto_stretch.min_extension", self.min_extension, 0, 1)
+        if isinstance(self.ease_in, list):
+            object.__setattr__(self, "ease_in", tuple(self.ease_in))
+        StretchSpec(limb="check", start=0, end=1, scale=self.arm, axes=self.axes, ease_in=self.ease_in)
+
+
+def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float,
+                 config: AutoStretchConfig) -> list[StretchSpec]:
+    """Stretch events for the strikes in ``world_pos (F, J, 3)`` (frame numbers relative to it)."""
+    from scipy.ndimage import gaussian_filter1d
+    from scipy.signal import find_peaks
+
+    frames = world_pos.shape[0]
+    if frames < 8:
+        return []
+    specs = []
+    lengths = skeleton.link_lengths()
+    for name, limb in limbs.items():
+        if not name.endswith(("_arm", "_leg")):
+            continue
+        full = float(sum(lengths[j] for j in limb.joints[1:]))
+        if full <= 0:
+            continue
+        reach = np.linalg.norm(world_pos[:, limb.end] - world_pos[:, limb.base], axis=-1) / full
+        relative = world_pos[:, limb.end] - world_pos[:, 0]
+        velocity = gaussian_filter1d(np.gradient(relative, frame_time, axis=0), 1.5, axis=0, mode="nearest")
+        speed = np.linalg.norm(velocity, axis=-1) / full  # limb lengths per second
+        floor = max(config.min_speed, config.speed_factor * float(np.median(speed)))
+        peaks, _ = find_peaks(speed, height=floor, distance=max(1, int(0.3 / frame_time)))
+        window = max(2, int(0.35 / frame_time))
+        release = int(round(0.1 / frame_time))
+        chosen: list[tuple[int, int, float]] = []
+        for peak in sorted(peaks, key=lambda p: -speed[p]):
+            stop = min(frames - 1, peak + window)
+            end = peak + int(np.argmax(reach[peak : stop + 1]))
+            if reach[end] < config.min_reach:
+                continue
+            start = peak
+            while start > 0 and speed[start - 1] > 0.5 * speed[peak] and peak - start < window:
+                start -= 1
+            if reach[end] - reach[start:end + 1].min() < config.min_extension:
+                continue
+            if end - start < 3 or any(start <= b + release and a <= end + release for a, b, _ in chosen):
+                continue
+            chosen.append((start, end, float(speed[peak])))
+        scale = config.arm if name.endswith("_arm") else config.leg
+        for start, end, _ in sorted(chosen):
+            specs.append(StretchSpec(limb=name, start=int(start), end=int(end), scale=scale, axes=config.axes,
+                                     ease_in=config.ease_in, release="0.1s"))
+    return specs
