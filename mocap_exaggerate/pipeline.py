@@ -445,6 +445,12 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
         whole[first:] = body
         stretch_result = apply_stretches(whole, skeleton, limbs, tuple(specs), motion.frame_time, paths=paths)
         body = stretch_result.positions[first:]
+        for event in stretch_result.events:
+            if event["axes_relaxed"]:
+                notes.append(
+                    f"stretch {event['limb']} frames {event['frames'][0]}-{event['frames'][1]}: the path cannot "
+                    f"squash to x{event['scale']:g} on axes {event['axes']}; squashed along the limb instead"
+                )
         timings["stretch"] = time.perf_counter() - start
 
     positions = world.copy()

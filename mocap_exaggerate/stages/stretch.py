@@ -254,16 +254,23 @@ def exaggerated_path(path: np.ndarray, base_at_final: np.ndarray, spec: StretchS
 
     path : (n, 3) end-effector positions over the range, in frame order
     base_at_final : (3,) base joint at the final frame (the last, or the first with pivot end)
-    Returns (new_path, effective_scale, exact).
+    Returns (new_path, effective_scale, exact); ``exact`` False means the
+    axes had to be relaxed (the end reaches S times the length along the limb).
     """
     ordered = path[::-1] if spec.pivot == "end" else path
     origin, final = ordered[0], ordered[-1]
     mask = np.array([a in spec.axes for a in _AXES])
-    effective, _, exact = solve_effective_scale(base_at_final, origin, final, spec.scale, mask)
+    effective, end_point, exact = solve_effective_scale(base_at_final, origin, final, spec.scale, mask)
     scaled = np.where(mask, origin + effective * (ordered - origin), ordered)
     steps = np.linalg.norm(np.diff(ordered, axis=0), axis=1)
     along = np.concatenate([[0.0], np.cumsum(steps)])
     ratio = along / along[-1] if along[-1] > 0 else np.linspace(0.0, 1.0, len(ordered))
+    if not exact and spec.scale != 1.0:
+        # The chosen axes cannot bring the end to S times the length (a squash across
+        # the motion): keep the limb length promise by ending on the limb's own axis,
+        # P0 + S (P1 - P0), and spread the difference along the path.
+        goal = base_at_final + spec.scale * (final - base_at_final)
+        scaled = scaled + ratio[:, None] * (goal - scaled[-1])
     weight = spec.blend * ease_curve(spec.ease_in, spec.ease_out)(ratio)
     new = (1.0 - weight)[:, None] * ordered + weight[:, None] * scaled
     return (new[::-1] if spec.pivot == "end" else new), effective, exact
@@ -352,7 +359,7 @@ def apply_stretches(
         _follow(world_pos, skeleton, limb, target, span)
         events.append({
             "limb": spec.limb, "frames": [first, last], "scale": float(spec.scale), "axes": spec.axes,
-            "pivot": spec.pivot, "effective_scale": round(float(effective), 6), "exact": bool(exact),
+            "pivot": spec.pivot, "effective_scale": round(float(effective), 6), "axes_relaxed": not exact,
         })
         trails.append({
             "limb": spec.limb, "joint": skeleton.names[end], "frames": list(range(lo, hi + 1)),
@@ -440,6 +447,11 @@ class AutoStretchConfig:
             raise ConfigError(f"auto_stretch.enabled must be true or false, got {self.enabled!r}")
         for name in ("arm", "leg", "spine", "neck"):
             check_number(f"auto_stretch.{name}", getattr(self, name), 0, MAX_SCALE)
+        if self.spine > max(self.arm, self.leg) or self.neck > max(self.arm, self.leg):
+            raise ConfigError(
+                "auto_stretch: the torso (spine, neck) should stretch no more than the limbs (arm, leg), "
+                f"got spine {self.spine:g}, neck {self.neck:g}, arm {self.arm:g}, leg {self.leg:g}"
+            )
         check_number("auto_stretch.min_speed", self.min_speed, 0, 100)
         check_number("auto_stretch.speed_factor", self.speed_factor, 1, 100)
         check_number("auto_stretch.min_reach", self.min_reach, 0, 1)
