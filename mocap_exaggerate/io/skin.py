@@ -1,0 +1,217 @@
+"""Skins: a mesh bound to a skeleton's joints. NPZ and MakeHuman readers, the NPZ writer.
+
+A skin is stored sparsely, as glTF does: for each vertex the indices of its
+strongest joints and their weights, ``(V, K)`` each, rows summing to 1.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .files import atomic_write
+
+__all__ = ["Skin", "load_skin", "load_npz_skin", "load_makehuman_skin", "skin_to_npz", "npz_bytes", "top_influences"]
+
+
+@dataclass(frozen=True, eq=False)
+class Skin:
+    """A skinned mesh in its bind pose.
+
+    vertices : (V, 3) float64, in the skeleton's units and rest pose
+    faces : (T, 3) int64 triangles
+    joint_names : names of the joints ``joints`` indexes into
+    joints : (V, K) int64 joint indices, 0 where the weight is 0
+    weights : (V, K) float64, each row sums to 1
+    bind : joint name -> (3,) bind-pose position, where the mesh's bind pose
+        is not the skeleton's rest pose (MakeHuman's A-pose); empty otherwise
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    joint_names: tuple[str, ...]
+    joints: np.ndarray
+    weights: np.ndarray
+    bind: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        v = np.asarray(self.vertices, dtype=np.float64)
+        if v.ndim != 2 or v.shape[1] != 3:
+            raise ValueError(f"vertices must be (V, 3), got {v.shape}")
+        if np.shape(self.joints) != np.shape(self.weights) or np.shape(self.joints)[0] != len(v):
+            raise ValueError(f"joints {np.shape(self.joints)} and weights {np.shape(self.weights)} must be (V, K)")
+        object.__setattr__(self, "vertices", v)
+        object.__setattr__(self, "faces", np.asarray(self.faces, dtype=np.int64).reshape(-1, 3))
+        object.__setattr__(self, "joints", np.asarray(self.joints, dtype=np.int64))
+        object.__setattr__(self, "weights", np.asarray(self.weights, dtype=np.float64))
+        object.__setattr__(self, "joint_names", tuple(self.joint_names))
+
+    @property
+    def num_vertices(self) -> int:
+        return len(self.vertices)
+
+
+def top_influences(rows: np.ndarray, cols: np.ndarray, values: np.ndarray, num_rows: int, k: int):
+    """The ``k`` strongest (column, value) pairs of each row of a sparse matrix, renormalised.
+
+    rows, cols, values : (E,) entries (duplicates are summed)
+    Returns joints (num_rows, k) int64 and weights (num_rows, k) float64; rows
+    without entries get joint 0 with weight 0.
+    """
+    order = np.lexsort((cols, rows))
+    rows, cols, values = rows[order], cols[order], values[order]
+    if len(rows):
+        new = np.concatenate([[True], (rows[1:] != rows[:-1]) | (cols[1:] != cols[:-1])])
+        starts = np.flatnonzero(new)
+        values = np.add.reduceat(values, starts)
+        rows, cols = rows[starts], cols[starts]
+    counts = np.bincount(rows, minlength=num_rows)
+    width = max(int(counts.max(initial=0)), 1)
+    slot = np.arange(len(rows)) - np.repeat(np.cumsum(counts) - counts, counts)
+    dense_w = np.zeros((num_rows, width))
+    dense_j = np.zeros((num_rows, width), dtype=np.int64)
+    dense_w[rows, slot] = values
+    dense_j[rows, slot] = cols
+    if width > k:
+        pick = np.argpartition(-dense_w, k - 1, axis=1)[:, :k]
+        dense_w = np.take_along_axis(dense_w, pick, axis=1)
+        dense_j = np.take_along_axis(dense_j, pick, axis=1)
+    elif width < k:
+        dense_w = np.pad(dense_w, ((0, 0), (0, k - width)))
+        dense_j = np.pad(dense_j, ((0, 0), (0, k - width)))
+    order = np.argsort(-dense_w, axis=1, kind="stable")
+    dense_w = np.take_along_axis(dense_w, order, axis=1)
+    dense_j = np.take_along_axis(dense_j, order, axis=1)
+    total = dense_w.sum(axis=1, keepdims=True)
+    dense_w = np.divide(dense_w, total, out=np.zeros_like(dense_w), where=total > 0)
+    dense_j[dense_w == 0] = 0
+    return dense_j, dense_w
+
+
+def load_npz_skin(path: str | os.PathLike) -> Skin:
+    """A skin from ``.npz``: vertices, faces, joint_names, and either joints + weights
+    ``(V, K)`` or dense weights ``(V, J)``."""
+    label = str(path)
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as error:
+        raise InputError(f"not a readable .npz skin ({error})", source=label) from None
+    missing = {"vertices", "faces", "joint_names", "weights"} - set(data.files)
+    if missing:
+        raise InputError(f"skin .npz lacks {', '.join(sorted(missing))}", source=label)
+    names = tuple(str(n) for n in data["joint_names"])
+    weights = np.asarray(data["weights"], dtype=np.float64)
+    if "joints" in data.files:
+        joints = data["joints"]
+    else:
+        if weights.ndim != 2 or weights.shape[1] != len(names):
+            raise InputError(f"dense weights must be (V, {len(names)}), got {weights.shape}", source=label)
+        rows, cols = np.nonzero(weights)
+        joints, weights = top_influences(rows, cols, weights[rows, cols], len(weights), 4)
+    try:
+        return Skin(data["vertices"], data["faces"], names, joints, weights)
+    except ValueError as error:
+        raise InputError(str(error), source=label) from None
+
+
+def load_makehuman_skin(obj_path: str | os.PathLike, weights_path: str | os.PathLike | None = None) -> Skin:
+    """The MakeHuman base mesh's ``body`` group with its ``.mhw`` weights (bones named as in its BVH)."""
+    obj_path = Path(obj_path)
+    if weights_path is None:
+        found = sorted(obj_path.parent.glob("*.mhw"))
+        if not found:
+            raise InputError("no .mhw weights file beside the .obj", source=str(obj_path))
+        weights_path = found[0]
+    vertices, faces = _read_obj_group(obj_path, "body")
+    try:
+        table = json.loads(Path(weights_path).read_text(encoding="utf-8"))["weights"]
+    except (OSError, ValueError, KeyError) as error:
+        raise InputError(f"not a MakeHuman weights file ({error})", source=str(weights_path)) from None
+    used = np.unique(faces)
+    remap = np.full(len(vertices), -1)
+    remap[used] = np.arange(len(used))
+    names = tuple(sorted(table))
+    rows, cols, values = [], [], []
+    for column, name in enumerate(names):
+        pairs = np.asarray(table[name], dtype=np.float64).reshape(-1, 2)
+        index = pairs[:, 0].astype(np.int64)
+        keep = (index < len(vertices)) & (remap[np.clip(index, 0, len(vertices) - 1)] >= 0)
+        rows.append(remap[index[keep]])
+        cols.append(np.full(int(keep.sum()), column))
+        values.append(pairs[keep, 1])
+    joints, weights = top_influences(np.concatenate(rows), np.concatenate(cols), np.concatenate(values), len(used), 8)
+    bind = {}
+    skeleton_files = sorted(obj_path.parent.glob("*.mhskel"))
+    if skeleton_files:
+        # Bone heads in the mesh's own (A-)pose: each joint is the mean of its vertex group.
+        rig = json.loads(skeleton_files[0].read_text(encoding="utf-8"))
+        for name, bone in rig.get("bones", {}).items():
+            group = rig.get("joints", {}).get(bone.get("head"), [])
+            if group:
+                bind[name] = vertices[np.asarray(group, dtype=np.int64)].mean(axis=0)
+    return Skin(vertices[used], remap[faces], names, joints, weights, bind)
+
+
+def _read_obj_group(path: Path, group: str) -> tuple[np.ndarray, np.ndarray]:
+    """All vertices and the triangulated faces of one group of an OBJ file."""
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as error:
+        raise InputError(f"cannot read ({error.strerror})", source=str(path)) from None
+    vertices, faces = [], []
+    current = None
+    for number, line in enumerate(text.splitlines(), start=1):
+        if line.startswith("v "):
+            vertices.append(line.split()[1:4])
+        elif line.startswith("g "):
+            current = line[2:].strip()
+        elif line.startswith("f ") and current == group:
+            corners = [int(part.split("/")[0]) - 1 for part in line.split()[1:]]
+            faces.extend([corners[0], corners[i], corners[i + 1]] for i in range(1, len(corners) - 1))
+    if not faces:
+        raise InputError(f"no faces in group {group!r}", source=str(path))
+    return np.array(vertices, dtype=np.float64), np.array(faces, dtype=np.int64)
+
+
+def load_skin(path: str | os.PathLike) -> Skin:
+    """A skin from ``.npz`` or a MakeHuman ``.obj`` (with its ``.mhw`` beside it)."""
+    suffix = Path(path).suffix.lower()
+    if not Path(path).exists():
+        raise InputError("no such skin file", source=str(path))
+    if suffix == ".npz":
+        return load_npz_skin(path)
+    if suffix == ".obj":
+        return load_makehuman_skin(path)
+    raise InputError("skins are read from .npz or a MakeHuman .obj (+ .mhw)", source=str(path))
+
+
+def skin_to_npz(skin: Skin, path: str | os.PathLike, *, overwrite: bool = False) -> None:
+    """Write a skin as ``.npz`` atomically, byte for byte the same for the same skin."""
+    atomic_write(Path(path), npz_bytes(
+        vertices=skin.vertices,
+        faces=skin.faces,
+        joint_names=np.array(skin.joint_names),
+        joints=skin.joints,
+        weights=skin.weights,
+    ), overwrite=overwrite)
+
+
+def npz_bytes(**arrays: np.ndarray) -> bytes:
+    """An ``.npz`` archive as bytes with fixed timestamps (``np.savez`` stamps the current time)."""
+    import io
+    import zipfile
+
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        for name, array in arrays.items():
+            member = io.BytesIO()
+            np.lib.format.write_array(member, np.asarray(array), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            archive.writestr(info, member.getvalue())
+    return buffer.getvalue()
