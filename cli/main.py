@@ -22,8 +22,10 @@ from mocap_exaggerate.errors import MocapError
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.io.files import atomic_write
 from mocap_exaggerate.limbs import find_limbs
+from mocap_exaggerate.io.skin import load_skin
 from mocap_exaggerate.pipeline import (
     DEFAULT_PRESET,
+    make_glb,
     manifest,
     preset_description,
     preset_names,
@@ -215,15 +217,22 @@ def cli(verbose: int, quiet: bool) -> None:
               help="Output folder (created if needed), or - to write the BVH to stdout.")
 @click.option("--name", default=None, help="Output file stem (default: the input's; 'stdin' for -).")
 @click.option("--overwrite", is_flag=True, help="Replace outputs that exist already.")
+@click.option("--skin", "skin_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Skin for the GLB: .npz (vertices, faces, joint_names, weights) bound to the clip's joints "
+                   "in its rest pose. Default: a capsule body grown from the skeleton.")
+@click.option("--units", default="auto", show_default=True,
+              help="BVH units for the GLB (metres): auto, m, dm, cm, mm, in, ft, cmu.")
+@click.option("--glb/--no-glb", "write_glb", default=True, show_default=True,
+              help="Also write OUT/<name>.glb (skinned, animated) and OUT/<name>.weights.npz.")
 @click.option("--trails", "trails_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the original and exaggerated end-effector paths of every stretch as JSON.")
 @click.option("--path-file", "path_file", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Apply hand-edited paths: a --trails file whose 'exaggerated' points you moved.")
 @pipeline_options
 @_fail_cleanly
-def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool, trails_path: Path | None,
-               path_file: Path | None, **options) -> None:
-    """Exaggerate one clip: writes OUT/<name>.bvh and OUT/<name>.json (manifest).
+def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool, skin_path: Path | None,
+               units: str, write_glb: bool, trails_path: Path | None, path_file: Path | None, **options) -> None:
+    """Exaggerate one clip: writes OUT/<name>.bvh, .glb, .weights.npz and .json (manifest).
 
     \b
     Examples:
@@ -277,20 +286,31 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
 
     bvh_path = output / f"{stem}.bvh"
     json_path = output / f"{stem}.json"
+    glb_path = output / f"{stem}.glb"
+    weights_path = output / f"{stem}.weights.npz"
     if output.exists() and not output.is_dir():
         raise UserError(f"{output}: exists and is not a folder")
-    if str(input_path) != "-" and bvh_path.resolve() == input_path.resolve():
-        raise UserError(f"{bvh_path}: would overwrite the input; choose another -o folder or --name")
-    for path in (bvh_path, json_path):
+    written = [bvh_path, json_path] + ([glb_path, weights_path] if write_glb else [])
+    for path in written:
+        if str(input_path) != "-" and path.resolve() == input_path.resolve():
+            raise UserError(f"{path}: would overwrite the input; choose another -o folder or --name")
         if path.exists() and not overwrite:
             raise UserError(f"{path} exists; pass --overwrite to replace it")
+    extra: dict[str, bytes] = {}
+    outputs = {"bvh": bvh_path.name}
+    if write_glb:
+        started_glb = time.perf_counter()
+        glb_bytes, npz_bytes_, how = make_glb(motion, result, load_skin(skin_path) if skin_path else None, units)
+        extra = {glb_path.name: glb_bytes, weights_path.name: npz_bytes_}
+        outputs.update(glb=glb_path.name, weights=weights_path.name, units=how)
+        result.timings["glb"] = time.perf_counter() - started_glb
     info = manifest(
         input_name=label,
         input_bytes=data,
         config=config,
         preset=preset,
         result=result,
-        outputs={"bvh": bvh_path.name},
+        outputs=outputs,
         read_seconds=read_seconds,
         write_seconds=write_seconds,
         reader_warnings=report.warnings,
@@ -300,11 +320,14 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
     started = time.perf_counter()
     atomic_write(bvh_path, bvh_bytes, overwrite=True)
     info["timings"]["write"] += time.perf_counter() - started
+    for file_name, data in extra.items():
+        atomic_write(output / file_name, data, overwrite=True)
     atomic_write(json_path, (json.dumps(info, indent=2) + "\n").encode("utf-8"), overwrite=True)
     total = sum(info["timings"].values())
     if not _quiet():
         click.echo(
-            f"wrote {bvh_path} and {json_path.name}: {result.motion.num_frames} frames, "
+            f"wrote {bvh_path}{', .glb, .weights.npz' if write_glb else ''} and {json_path.name}: "
+            f"{result.motion.num_frames} frames, "
             f"{result.motion.skeleton.num_joints} joints, max link stretch {result.max_link_stretch:.2f}x, "
             f"{total:.2f} s",
             err=True,

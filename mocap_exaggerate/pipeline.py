@@ -45,6 +45,7 @@ __all__ = [
     "run",
     "exaggerate",
     "pipeline_limbs",
+    "make_glb",
     "STAGES",
 ]
 
@@ -602,3 +603,31 @@ def manifest(
             k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(result.correct_report).items()
         }
     return info
+
+
+def make_glb(motion: Motion, result: PipelineResult, skin=None, units: str = "auto") -> tuple[bytes, bytes, str]:
+    """The skinned GLB of a run, its skin as ``.npz`` bytes, and how the units were decided.
+
+    skin : a `Skin` bound to ``motion``'s joints in its rest pose, or None for
+        the default body grown from the skeleton; either is re-weighted onto
+        the sub-joints when the output skeleton is the rubber one.
+    """
+    from .io.gltf import format_glb, unit_scale
+    from .io.skin import npz_bytes
+    from .stages.body import default_skin
+    from .stages.reweight import reweight
+
+    hierarchy = result.hierarchy
+    skeleton = motion.skeleton
+    if skin is None:
+        skin = default_skin(skeleton, hierarchy.rigid if hierarchy is not None else None)
+    elif skin.bind:
+        raise ConfigError("the skin's bind pose is not the clip's rest pose; the GLB needs a skin bound in the "
+                          "BVH's rest pose (.npz)")
+    if hierarchy is not None and result.motion.skeleton is hierarchy.skeleton:
+        skin = reweight(skin, skeleton, hierarchy)
+    scale, how = unit_scale(units, skeleton.height())
+    glb = format_glb(result.motion, skin, meters_per_unit=scale)
+    weights = npz_bytes(joint_names=np.array(skin.joint_names), joints=skin.joints, weights=skin.weights,
+                        vertices=skin.vertices, faces=skin.faces)
+    return glb, weights, how

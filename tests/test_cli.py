@@ -76,7 +76,7 @@ def test_stdin_to_stdout(runner, sample_clip):
 def test_stdin_to_folder_uses_name(runner, sample_clip, tmp_path):
     result = runner.invoke(cli, ["exaggerate", "-", "-o", str(tmp_path), "--name", "take1"], input=sample_clip.read_bytes())
     assert result.exit_code == 0, result.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["take1.bvh", "take1.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["take1.bvh", "take1.glb", "take1.json", "take1.weights.npz"]
 
 
 @pytest.mark.parametrize("name", sorted(MALFORMED))
@@ -234,3 +234,18 @@ def test_info_groups(runner, sample_clip):
     assert "rigid       leftEye" in result.output
     data = json.loads(runner.invoke(cli, ["info", str(sample_clip), "--groups", "--json"]).output)
     assert len(data["groups"]) == 5 and data["subjoints"] == 103
+
+
+def test_glb_options(runner, sample_clip, tmp_path):
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "a"), "--no-glb"])
+    assert result.exit_code == 0, result.stderr
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["cmu_09_01_run_daz.bvh", "cmu_09_01_run_daz.json"]
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "b"), "--units", "cm"])
+    assert result.exit_code == 0, result.stderr
+    info = json.loads((tmp_path / "b" / "cmu_09_01_run_daz.json").read_text())
+    assert info["outputs"]["glb"] == "cmu_09_01_run_daz.glb" and info["outputs"]["units"] == "cm"
+    for args, words in [(["--units", "furlong"], "units must be"), (["--skin", str(tmp_path / "none.npz")], "no such skin"),
+                        (["--skin", str(sample_clip)], "skins are read from")]:
+        result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "c"), *args])
+        assert result.exit_code == 2 and words in result.stderr, result.stderr
+        assert not (tmp_path / "c").exists()

@@ -37,7 +37,9 @@ def segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nda
     """Distance from points to segments a-b, broadcasting over leading axes."""
     ab = b - a
     length2 = np.sum(ab * ab, axis=-1)
-    t = np.divide(np.sum((points - a) * ab, axis=-1), length2, out=np.zeros_like(length2), where=length2 > 0)
+    along = np.sum((points - a) * ab, axis=-1)
+    length2 = np.broadcast_to(length2, along.shape)
+    t = np.divide(along, length2, out=np.zeros_like(along), where=length2 > 0)
     closest = a + np.clip(t, 0.0, 1.0)[..., None] * ab
     return np.linalg.norm(points - closest, axis=-1)
 

@@ -1,0 +1,172 @@
+"""Skinned glTF 2.0 binary (GLB) output, written with pygltflib.
+
+One node per joint (rest translation = the BVH offset, identity rotation,
+exactly the BVH's rest pose), one skin whose inverse bind matrices undo the
+rest pose, the mesh with POSITION, NORMAL, JOINTS_0 and WEIGHTS_0, and one
+animation with a translation and a rotation sampler per joint (6-DOF, as the
+BVH). Units are metres; BVH units are given or guessed from the skeleton's
+height.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pygltflib as gl
+
+from ..errors import ConfigError
+from ..motion import Motion
+from ..rotations import quat_unroll
+from .files import atomic_write
+from .skin import Skin
+
+__all__ = ["UNITS", "unit_scale", "format_glb", "save_glb"]
+
+#: Metres per unit.
+UNITS = {"m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048, "cmu": 0.0254 / 0.45}
+
+
+def unit_scale(units: str, height: float) -> tuple[float, str]:
+    """Metres per BVH unit, and how it was decided.
+
+    ``auto`` takes centimetres for a skeleton over 50 units tall and metres
+    under 3; anything between is scaled to a 1.7 m tall figure (CMU's own
+    unit is 1/0.45 inch: pass ``cmu``).
+    """
+    if units != "auto":
+        if units not in UNITS:
+            raise ConfigError(f"units must be auto or one of {', '.join(UNITS)}, got {units!r}")
+        return UNITS[units], units
+    if height >= 50:
+        return 0.01, "cm (guessed from the skeleton's height)"
+    if height <= 3:
+        return 1.0, "m (guessed from the skeleton's height)"
+    return 1.7 / height, "scaled to a 1.7 m figure (height between 3 and 50 units; pass --units)"
+
+
+def _pad4(data: bytes) -> bytes:
+    return data + b"\x00" * (-len(data) % 4)
+
+
+class _Buffer:
+    """Accumulates binary data and the bufferViews/accessors that point into it."""
+
+    def __init__(self, gltf: gl.GLTF2) -> None:
+        self.gltf = gltf
+        self.blob = bytearray()
+
+    def add(self, array: np.ndarray, kind: str, component: int, *, target: int | None = None,
+            bounds: bool = False, normalized: bool = False) -> int:
+        data = np.ascontiguousarray(array)
+        offset = len(self.blob)
+        self.blob += _pad4(data.tobytes())
+        self.gltf.bufferViews.append(gl.BufferView(buffer=0, byteOffset=offset, byteLength=data.nbytes, target=target))
+        accessor = gl.Accessor(
+            bufferView=len(self.gltf.bufferViews) - 1,
+            componentType=component,
+            count=len(data),
+            type=kind,
+            normalized=normalized or None,
+        )
+        if bounds:
+            flat = data.reshape(len(data), -1)
+            accessor.min = [float(v) for v in flat.min(axis=0)]
+            accessor.max = [float(v) for v in flat.max(axis=0)]
+        self.gltf.accessors.append(accessor)
+        return len(self.gltf.accessors) - 1
+
+
+def _weights_for_gltf(weights: np.ndarray) -> np.ndarray:
+    """float32 weights whose rows sum to 1 after the cast (the validator checks it)."""
+    w = weights.astype(np.float32)
+    total = w.sum(axis=1, keepdims=True)
+    w = np.where(total > 0, w / total, w).astype(np.float32)
+    strongest = np.argmax(w, axis=1)
+    rest = w.sum(axis=1) - w[np.arange(len(w)), strongest]
+    w[np.arange(len(w)), strongest] = (np.float32(1.0) - rest).astype(np.float32)
+    return w
+
+
+def format_glb(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name: str = "mocap_exaggerate") -> bytes:
+    """The whole GLB as bytes.
+
+    motion : the output Motion (its skeleton is the one the skin is bound to)
+    skin : bound to ``motion.skeleton``'s joints by name, in its rest pose
+    """
+    skeleton = motion.skeleton
+    index = {n: j for j, n in enumerate(skeleton.names)}
+    missing = [n for n in skin.joint_names if n not in index]
+    if missing:
+        raise ConfigError(f"skin joints not in the output skeleton: {', '.join(missing[:5])}")
+    scale = float(meters_per_unit)
+    gltf = gl.GLTF2(asset=gl.Asset(generator="mocap_exaggerate", version="2.0"))
+    gltf.scene = 0
+    buffer = _Buffer(gltf)
+
+    # Joint nodes, rest pose: translation = offset, no rotation.
+    children = [[] for _ in range(skeleton.num_joints)]
+    for j in range(1, skeleton.num_joints):
+        children[skeleton.parents[j]].append(j)
+    for j in range(skeleton.num_joints):
+        node = gl.Node(name=skeleton.names[j], translation=[float(v) * scale for v in skeleton.offsets[j]])
+        if children[j]:
+            node.children = children[j]
+        gltf.nodes.append(node)
+    mesh_node = skeleton.num_joints
+    gltf.nodes.append(gl.Node(name=f"{name}_body", mesh=0, skin=0))
+    gltf.scenes.append(gl.Scene(nodes=[0, mesh_node]))
+
+    rest = skeleton.rest_positions() * scale
+    inverse_bind = np.zeros((skeleton.num_joints, 4, 4), dtype=np.float32)
+    inverse_bind[:] = np.eye(4, dtype=np.float32)
+    inverse_bind[:, :3, 3] = -rest
+    # glTF matrices are column-major: store the transpose row by row.
+    ibm = buffer.add(inverse_bind.transpose(0, 2, 1).reshape(-1, 16), "MAT4", gl.FLOAT)
+    gltf.skins.append(gl.Skin(joints=list(range(skeleton.num_joints)), inverseBindMatrices=ibm, skeleton=0))
+
+    import trimesh
+
+    mesh = trimesh.Trimesh(skin.vertices, skin.faces, process=False)
+    positions = (skin.vertices * scale).astype(np.float32)
+    normals = np.asarray(mesh.vertex_normals, dtype=np.float32)
+    remap = np.array([index[n] for n in skin.joint_names], dtype=np.int64)
+    weights = _weights_for_gltf(skin.weights[:, :4])
+    joints = np.where(weights > 0, remap[skin.joints[:, :4]], 0)
+    joint_type, joint_dtype = (gl.UNSIGNED_BYTE, np.uint8) if skeleton.num_joints <= 255 else (gl.UNSIGNED_SHORT, np.uint16)
+    attributes = gl.Attributes(
+        POSITION=buffer.add(positions, "VEC3", gl.FLOAT, target=gl.ARRAY_BUFFER, bounds=True),
+        NORMAL=buffer.add(normals, "VEC3", gl.FLOAT, target=gl.ARRAY_BUFFER),
+        JOINTS_0=buffer.add(joints.astype(joint_dtype), "VEC4", joint_type, target=gl.ARRAY_BUFFER),
+        WEIGHTS_0=buffer.add(weights, "VEC4", gl.FLOAT, target=gl.ARRAY_BUFFER),
+    )
+    vertex_index = gl.UNSIGNED_INT if len(positions) > 65535 else gl.UNSIGNED_SHORT
+    index_dtype = np.uint32 if vertex_index == gl.UNSIGNED_INT else np.uint16
+    indices = buffer.add(skin.faces.astype(index_dtype).reshape(-1), "SCALAR", vertex_index,
+                         target=gl.ELEMENT_ARRAY_BUFFER)
+    gltf.meshes.append(gl.Mesh(name=f"{name}_body", primitives=[gl.Primitive(attributes=attributes, indices=indices)]))
+
+    # Animation: one translation and one rotation sampler per joint.
+    times = (np.arange(motion.num_frames) * motion.frame_time).astype(np.float32)
+    time_accessor = buffer.add(times, "SCALAR", gl.FLOAT, bounds=True)
+    rotations = quat_unroll(motion.local_rotations, axis=0)
+    rotations = (rotations / np.linalg.norm(rotations, axis=-1, keepdims=True)).astype(np.float32)
+    translations = (motion.local_positions * scale).astype(np.float32)
+    samplers, channels = [], []
+    for j in range(skeleton.num_joints):
+        for path, values, kind in (("translation", translations[:, j], "VEC3"), ("rotation", rotations[:, j], "VEC4")):
+            output = buffer.add(values, kind, gl.FLOAT)
+            samplers.append(gl.AnimationSampler(input=time_accessor, output=output, interpolation="LINEAR"))
+            channels.append(gl.AnimationChannel(sampler=len(samplers) - 1,
+                                                target=gl.AnimationChannelTarget(node=j, path=path)))
+    gltf.animations.append(gl.Animation(name=name, samplers=samplers, channels=channels))
+    gltf.buffers.append(gl.Buffer(byteLength=len(buffer.blob)))
+    gltf.set_binary_blob(bytes(buffer.blob))
+    return b"".join(gltf.save_to_bytes())
+
+
+def save_glb(motion: Motion, skin: Skin, path: str | os.PathLike, *, meters_per_unit: float = 1.0,
+             overwrite: bool = False) -> None:
+    """Write the GLB atomically."""
+    atomic_write(Path(path), format_glb(motion, skin, meters_per_unit=meters_per_unit), overwrite=overwrite)

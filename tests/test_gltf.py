@@ -1,0 +1,166 @@
+"""Skinned GLB output: the Khronos validator, reading it back, and the skinned mesh following the skeleton."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pygltflib
+import pytest
+import trimesh
+
+from mocap_exaggerate.io.gltf import unit_scale
+from mocap_exaggerate.io.bvh import read_bvh
+from mocap_exaggerate.io.skin import Skin, load_skin
+from mocap_exaggerate.pipeline import load_preset, make_glb, resolve_config, run
+from mocap_exaggerate.rotations import quat_rotate
+from mocap_exaggerate.stages.body import default_skin
+from mocap_exaggerate.stages.reweight import reweight, segment_distance, subjoint_bind_positions
+from mocap_exaggerate.stages.subjoints import build_hierarchy
+
+from .helpers import ROOT, SHARED_BVH, all_clip_params, shared
+
+VALIDATOR = Path(__file__).parent / "gltf" / "validate.mjs"
+HAS_VALIDATOR = shutil.which("node") is not None and (Path(__file__).parent / "gltf" / "node_modules" / "gltf-validator").exists()
+needs_validator = pytest.mark.skipif(
+    not HAS_VALIDATOR, reason="Khronos gltf-validator not installed (run: npm ci --prefix tests/gltf; .ci/run does)"
+)
+
+
+def glb_for(path: Path, preset: str = "cartoon", overrides: dict | None = None):
+    motion, _ = read_bvh(path)
+    result = run(motion, resolve_config(preset, None, overrides))
+    glb, weights, how = make_glb(motion, result, None, "auto")
+    return motion, result, glb, weights
+
+
+def validate(glb: bytes, tmp_path: Path) -> dict:
+    file = tmp_path / "check.glb"
+    file.write_bytes(glb)
+    done = subprocess.run(["node", str(VALIDATOR), str(file)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+@needs_validator
+@pytest.mark.parametrize("path", all_clip_params())
+def test_validator_finds_no_errors_or_warnings(path, tmp_path):
+    _, _, glb, _ = glb_for(path)
+    report = validate(glb, tmp_path)
+    issues = report["issues"]
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"][:5]
+
+
+@needs_validator
+def test_validator_on_the_original_skeleton_and_a_given_skin(sample_clip, tmp_path):
+    _, _, glb, _ = glb_for(sample_clip, overrides={"output": {"skeleton": "original"}})
+    assert validate(glb, tmp_path)["issues"]["numErrors"] == 0
+    motion, _ = read_bvh(sample_clip)
+    skin_file = tmp_path / "given.npz"
+    body = default_skin(motion.skeleton)
+    np.savez(skin_file, vertices=body.vertices, faces=body.faces, joint_names=np.array(body.joint_names),
+             joints=body.joints, weights=body.weights)
+    result = run(motion, load_preset("cartoon"))
+    glb, _, _ = make_glb(motion, result, load_skin(skin_file), "cm")
+    report = validate(glb, tmp_path)
+    assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0
+
+
+def skinned_vertices(glb: bytes, frame: int, result, meters: float):
+    """Linear blend skinning of the GLB's own mesh, weights and bind matrices with the run's
+    world transforms at ``frame`` (in metres)."""
+    gltf = pygltflib.GLTF2.load_from_bytes(glb)
+    blob = gltf.binary_blob()
+
+    def read(index, dtype, width):
+        accessor = gltf.accessors[index]
+        view = gltf.bufferViews[accessor.bufferView]
+        data = np.frombuffer(blob, dtype=dtype, count=accessor.count * width, offset=view.byteOffset)
+        return data.reshape(accessor.count, width)
+
+    primitive = gltf.meshes[0].primitives[0]
+    positions = read(primitive.attributes.POSITION, np.float32, 3).astype(np.float64)
+    small = gltf.accessors[primitive.attributes.JOINTS_0].componentType == pygltflib.UNSIGNED_BYTE
+    joints = read(primitive.attributes.JOINTS_0, np.uint8 if small else np.uint16, 4).astype(np.int64)
+    weights = read(primitive.attributes.WEIGHTS_0, np.float32, 4).astype(np.float64)
+    ibm = read(gltf.skins[0].inverseBindMatrices, np.float32, 16).reshape(-1, 4, 4).transpose(0, 2, 1)
+    # Bind matrices are pure translations: v' = sum_j w_j (R_j (v + t_j) + p_j).
+    local = positions[:, None, :] + ibm[joints, :3, 3]
+    moved = quat_rotate(result.world_rotations[frame][joints], local) + result.world_positions[frame][joints] * meters
+    return np.sum(weights[..., None] * moved, axis=1), weights
+
+
+@pytest.mark.parametrize("clip", ["cmu_09_01_run_daz.bvh", "mocapbank_sit_down_stand_up.bvh"])
+def test_read_back_counts_weights_and_the_mesh_follows_the_skeleton(clip):
+    path = ROOT / "sample_data" / clip
+    motion, result, glb, weights_npz = glb_for(path)
+    gltf = pygltflib.GLTF2.load_from_bytes(glb)
+    assert len(gltf.skins[0].joints) == result.motion.skeleton.num_joints
+    assert len(gltf.animations[0].channels) == 2 * result.motion.skeleton.num_joints
+    stored = np.load(io.BytesIO(weights_npz))
+    height = motion.skeleton.height()
+    assert list(stored["joint_names"]) == list(result.motion.skeleton.names)
+    meters = unit_scale("auto", height)[0]
+    for frame in (10, motion.num_frames // 2, motion.num_frames - 1):
+        vertices, weights = skinned_vertices(glb, frame, result, meters)
+        assert np.allclose(weights.sum(axis=1), 1.0, atol=1e-6)
+        assert len(vertices) == len(stored["vertices"])
+        # Every vertex stays near the posed skeleton: within a limb's thickness of some joint.
+        joints = result.world_positions[frame] * meters
+        nearest = np.min(np.linalg.norm(vertices[:, None] - joints[None], axis=-1), axis=1)
+        assert np.median(nearest) < 0.08 * height * meters
+        assert np.max(nearest) < 0.35 * height * meters
+
+
+def test_default_body_is_one_watertight_mesh_on_every_sample_clip():
+    for path in sorted((ROOT / "sample_data").glob("*.bvh")):
+        motion, _ = read_bvh(path)
+        body = default_skin(motion.skeleton, build_hierarchy(motion.skeleton).rigid)
+        mesh = trimesh.Trimesh(body.vertices, body.faces, process=False)
+        assert mesh.is_watertight and mesh.volume > 0
+        assert len(mesh.split(only_watertight=False)) == 1
+        assert np.allclose(body.weights.sum(axis=1), 1.0)
+
+
+def test_reweighting_splits_each_weight_by_inverse_distance(sample_clip):
+    motion, _ = read_bvh(sample_clip)
+    skeleton = motion.skeleton
+    hierarchy = build_hierarchy(skeleton)
+    arm = skeleton.index("lShldr")
+    rest = skeleton.rest_positions()
+    elbow = skeleton.index("lForeArm")
+    # Three vertices beside the upper arm, each bound only to it.
+    along = rest[arm] + np.array([0.2, 0.5, 0.8])[:, None] * (rest[elbow] - rest[arm]) + np.array([0, 0, 3.0])
+    skin = Skin(along, np.array([[0, 1, 2]]), ("lShldr",), np.zeros((3, 1), int), np.ones((3, 1)))
+    out = reweight(skin, skeleton, hierarchy, max_influences=8)
+    bind = subjoint_bind_positions(skeleton, hierarchy)
+    names = out.joint_names
+    for v in range(3):
+        w = out.weights[v][out.weights[v] > 0]
+        j = out.joints[v][out.weights[v] > 0]
+        assert w.sum() == pytest.approx(1.0)
+        assert {names[k] for k in j} <= {"lShldr", "lForeArm_s1", "lForeArm_s2", "lForeArm_s3"}
+        # In proportion to the inverse distance to each sub-link segment (the one starting at the
+        # joint; sub-joints are numbered along the link, so it ends at the next index).
+        distance = segment_distance(along[v], bind[j], bind[j + 1])
+        assert np.allclose(w * distance, (w * distance)[0], rtol=1e-9)
+        assert len(w) == 4  # the shoulder and the three sub-joints share the upper arm
+
+
+def test_makehuman_skin_reweights_fast_and_sensibly():
+    skin = load_skin(shared("../skin/makehuman_base.obj"))
+    motion, _ = read_bvh(SHARED_BVH.parent / "skin" / "makehuman_default_tpose.bvh")
+    hierarchy = build_hierarchy(motion.skeleton)
+    assert len(skin.joint_names) == 139 and skin.num_vertices == 13380
+    out = reweight(skin, motion.skeleton, hierarchy)
+    assert np.allclose(out.weights.sum(axis=1), 1.0)
+    assert out.joints.shape == (13380, 4)
+    bind = subjoint_bind_positions(motion.skeleton, hierarchy, skin.bind)
+    distance = np.linalg.norm(skin.vertices - bind[out.joints[:, 0]], axis=1)
+    assert np.median(distance) < 0.05 * np.ptp(skin.vertices[:, 1])  # strongest joint is close by
+    used = {out.joint_names[j] for j in np.unique(out.joints[out.weights > 0])}
+    assert any(name.startswith("upperarm02.L_s") for name in used)
