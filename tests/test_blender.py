@@ -59,3 +59,39 @@ def test_blender_imports_the_rubber_bvh_where_we_computed_it(clip, tmp_path):
     for frame in frames:
         theirs = np.array([seen["positions"][str(frame)][name] for name in names])
         assert np.max(np.abs(theirs - result.world_positions[frame])) < tolerance, frame
+
+
+GLB_SCRIPT = Path(__file__).parent / "blender" / "read_glb.py"
+
+
+@needs_blender
+@pytest.mark.parametrize("clip", ["cmu_09_01_run_daz.bvh", "cmu_16_01_jump_amc2bvh.bvh"])
+def test_blender_imports_the_glb_and_deforms_the_mesh_as_we_do(clip, tmp_path):
+    from scipy.spatial import cKDTree
+
+    from mocap_exaggerate.io.gltf import unit_scale
+    from mocap_exaggerate.pipeline import make_glb
+
+    from .test_gltf import skinned_vertices
+
+    motion, _ = read_bvh(SAMPLE_DIR / clip)
+    result = run(motion, load_preset("cartoon"))
+    glb, _, _ = make_glb(motion, result)
+    path = tmp_path / "rubber.glb"
+    path.write_bytes(glb)
+    frames = [5, motion.num_frames // 2]
+    done = subprocess.run([BPY, str(GLB_SCRIPT), str(path), str(motion.fps), *map(str, frames)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    seen = json.loads(next(l for l in done.stdout.splitlines() if l.startswith("JSON:"))[5:])
+    assert seen["bones"] == result.motion.skeleton.num_joints
+    assert seen["frame_range"][1] - seen["frame_range"][0] == pytest.approx(motion.num_frames - 1, abs=0.01)
+    meters = unit_scale("auto", motion.skeleton.height())[0]
+    for frame in frames:
+        ours, _ = skinned_vertices(glb, frame, result, meters)
+        theirs = np.array(seen["meshes"][str(frame)])
+        distance, _ = cKDTree(ours).query(theirs)
+        assert distance.max() < 1e-4  # metres: Blender deforms the mesh exactly as our skinning says
+        # and it really moves: the mesh at the two frames differs.
+    first, second = (np.array(seen["meshes"][str(f)]) for f in frames)
+    assert np.abs(first - second).max() > 0.05
