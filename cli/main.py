@@ -435,6 +435,35 @@ def info(input_path: Path, limbs: bool, groups: bool, fps: float | None, as_json
 
 
 @cli.command()
+@click.argument("input_path", metavar="IN.bvh", type=click.Path(path_type=Path, allow_dash=True))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="PNG file to write.")
+@click.option("--frames", "count", type=click.IntRange(1, 12), default=5, show_default=True,
+              help="How many evenly spaced frames to show.")
+@click.option("--overwrite", is_flag=True, help="Replace the PNG if it exists.")
+@pipeline_options
+@_fail_cleanly
+def preview(input_path: Path, output: Path, count: int, overwrite: bool, **options) -> None:
+    """Render the skinned body, captured above and exaggerated below, to a PNG (no GPU, no display).
+
+    \b
+    Example:
+      mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o run.png --preset looney
+    """
+    from mocap_exaggerate.preview import render_preview
+
+    preset, config = _config_from_options(options)
+    if output.exists() and not overwrite:
+        raise UserError(f"{output} exists; pass --overwrite to replace it")
+    label = "<stdin>" if str(input_path) == "-" else str(input_path)
+    motion, _ = read_bvh(input_path, name=label, fps=config.input.fps)
+    result = run(motion, config)
+    atomic_write(output, render_preview(motion, result, frames=count), overwrite=True)
+    if not _quiet():
+        click.echo(f"wrote {output}", err=True)
+
+
+@cli.command()
 def presets() -> None:
     """List the shipped presets and what they do.
 

@@ -163,7 +163,7 @@ def test_presets_command(runner):
     assert "cartoon (default):" in result.output and "looney:" in result.output and "subtle:" in result.output
 
 
-@pytest.mark.parametrize("command", [[], ["exaggerate"], ["info"], ["presets"]])
+@pytest.mark.parametrize("command", [[], ["exaggerate"], ["info"], ["presets"], ["preview"]])
 def test_help_shows_an_example(runner, command):
     result = runner.invoke(cli, [*command, "--help"])
     assert result.exit_code == 0
@@ -249,3 +249,17 @@ def test_glb_options(runner, sample_clip, tmp_path):
         result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "c"), *args])
         assert result.exit_code == 2 and words in result.stderr, result.stderr
         assert not (tmp_path / "c").exists()
+
+
+def test_preview_writes_a_png(runner, sample_clip, tmp_path):
+    target = tmp_path / "run.png"
+    result = runner.invoke(cli, ["preview", str(sample_clip), "-o", str(target), "--frames", "3", "--preset", "looney"])
+    assert result.exit_code == 0, result.stderr
+    data = target.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+    again = runner.invoke(cli, ["preview", str(sample_clip), "-o", str(target)])
+    assert again.exit_code == 2 and "--overwrite" in again.stderr
+    assert target.read_bytes() == data
+    assert runner.invoke(cli, ["preview", str(sample_clip), "-o", str(tmp_path / "b.png"), "--frames", "3",
+                               "--preset", "looney"]).exit_code == 0
+    assert (tmp_path / "b.png").read_bytes() == data  # deterministic

@@ -1,0 +1,109 @@
+"""Pictures without a GPU or a display: the skinned body at a few frames, captured above, exaggerated below.
+
+The mesh is posed by linear blend skinning and drawn with matplotlib (Agg) as
+shaded triangles sorted back to front, seen from the side the body faces most.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .io.files import atomic_write
+from .io.skin import Skin
+from .motion import Motion
+from .pipeline import PipelineResult
+from .rotations import quat_rotate
+from .stages.body import default_skin
+from .stages.reweight import reweight
+
+__all__ = ["pose_skin", "render_preview", "save_preview"]
+
+
+def pose_skin(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray,
+              joint_index: np.ndarray) -> np.ndarray:
+    """Linear blend skinning: vertices ``(V, 3)`` of ``skin`` posed by one frame's world transforms.
+
+    bind : (J, 3) rest (bind) position of each skeleton joint; world_rot (J, 4), world_pos (J, 3);
+    joint_index : (len(skin.joint_names),) skeleton index of each skin joint.
+    The bind pose has identity orientations (BVH rest), so a vertex moves as
+    ``R_j (v - bind_j) + p_j`` under joint j.
+    """
+    joints = joint_index[skin.joints]
+    moved = quat_rotate(world_rot[joints], skin.vertices[:, None, :] - bind[joints]) + world_pos[joints]
+    return np.sum(skin.weights[..., None] * moved, axis=1)
+
+
+def _draw(ax, vertices: np.ndarray, faces: np.ndarray, axes: tuple[int, int, int], color: tuple) -> None:
+    from matplotlib.collections import PolyCollection
+
+    right, up, depth = axes
+    triangles = vertices[faces]
+    normal = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    light = np.zeros(3)
+    light[depth], light[up] = 0.8, 0.6
+    shade = 0.35 + 0.65 * np.clip(normal @ light, 0.0, 1.0)
+    order = np.argsort(triangles[:, :, depth].mean(axis=1))  # far first
+    polygons = triangles[order][:, :, [right, up]]
+    colors = np.clip(np.outer(shade[order], color), 0.0, 1.0)
+    ax.add_collection(PolyCollection(polygons, facecolors=colors, edgecolors="none"))
+
+
+def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, width: float = 2.4) -> bytes:
+    """A PNG: the captured (top, grey) and exaggerated (bottom, orange) body at evenly spaced frames."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    skeleton = motion.skeleton
+    hierarchy = result.hierarchy
+    body = default_skin(skeleton, hierarchy.rigid if hierarchy is not None else None)
+    out_skeleton = result.motion.skeleton
+    rubber = reweight(body, skeleton, hierarchy) if hierarchy is not None and out_skeleton is hierarchy.skeleton else body
+    captured_rot, captured_pos = motion.forward_kinematics()
+    first = result.rest_frames if not result.rest_frames_dropped else 0
+    picks = np.unique(np.linspace(first, motion.num_frames - 1, frames).astype(int))
+    up = skeleton.up_axis()
+    # Look along the horizontal axis the body moves least along (its side).
+    horizontal = [a for a in range(3) if a != up]
+    spread = np.ptp(captured_pos[:, 0, horizontal], axis=0)
+    depth = horizontal[int(np.argmin(spread))]
+    right = horizontal[int(np.argmax(spread))] if spread.max() > 0 else horizontal[0]
+    height = skeleton.height()
+    bind_in = skeleton.rest_positions()
+    bind_out = out_skeleton.rest_positions()
+    index_in = np.array([skeleton.index(n) for n in body.joint_names])
+    index_out = np.array([out_skeleton.index(n) for n in rubber.joint_names])
+    figure, axes = plt.subplots(2, len(picks), figsize=(width * len(picks), 2 * width * 1.1), squeeze=False)
+    low = min(captured_pos[:, :, up].min(), result.world_positions[:, :, up].min())
+    for column, frame in enumerate(picks):
+        for row, (skin, bind, index, rot, pos, color) in enumerate((
+            (body, bind_in, index_in, captured_rot[frame], captured_pos[frame], (0.75, 0.75, 0.78)),
+            (rubber, bind_out, index_out, result.world_rotations[frame], result.world_positions[frame], (1.0, 0.62, 0.25)),
+        )):
+            ax = axes[row, column]
+            vertices = pose_skin(skin, bind, rot, pos, index)
+            _draw(ax, vertices, skin.faces, (right, up, depth), color)
+            centre = captured_pos[frame, 0, right]
+            ax.set_xlim(centre - 0.75 * height, centre + 0.75 * height)
+            ax.set_ylim(low - 0.05 * height, low + 1.45 * height)
+            ax.set_aspect("equal")
+            ax.axis("off")
+            if row == 0:
+                ax.set_title(f"frame {frame}", fontsize=9)
+    figure.suptitle("captured (top) and exaggerated (bottom)", fontsize=10)
+    figure.tight_layout()
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=80, metadata={"Software": None})
+    plt.close(figure)
+    return buffer.getvalue()
+
+
+def save_preview(motion: Motion, result: PipelineResult, path: str | os.PathLike, *, frames: int = 5,
+                 overwrite: bool = False) -> None:
+    atomic_write(Path(path), render_preview(motion, result, frames=frames), overwrite=overwrite)
