@@ -222,6 +222,8 @@ def cli(verbose: int, quiet: bool) -> None:
                    "in its rest pose. Default: a capsule body grown from the skeleton.")
 @click.option("--units", default="auto", show_default=True,
               help="BVH units for the GLB (metres): auto, m, dm, cm, mm, in, ft, cmu.")
+@click.option("--influences", type=click.Choice(["4", "8"]), default="4", show_default=True,
+              help="Joints per vertex in the GLB: 4 (JOINTS_0) or 8 (a second JOINTS_1/WEIGHTS_1 set).")
 @click.option("--glb/--no-glb", "write_glb", default=True, show_default=True,
               help="Also write OUT/<name>.glb (skinned, animated) and OUT/<name>.weights.npz.")
 @click.option("--trails", "trails_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
@@ -231,7 +233,7 @@ def cli(verbose: int, quiet: bool) -> None:
 @pipeline_options
 @_fail_cleanly
 def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool, skin_path: Path | None,
-               units: str, write_glb: bool, trails_path: Path | None, path_file: Path | None, **options) -> None:
+               units: str, influences: str, write_glb: bool, trails_path: Path | None, path_file: Path | None, **options) -> None:
     """Exaggerate one clip: writes OUT/<name>.bvh, .glb, .weights.npz and .json (manifest).
 
     \b
@@ -300,7 +302,8 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
     outputs = {"bvh": bvh_path.name}
     if write_glb:
         started_glb = time.perf_counter()
-        glb_bytes, npz_bytes_, how = make_glb(motion, result, load_skin(skin_path) if skin_path else None, units)
+        glb_bytes, npz_bytes_, how = make_glb(motion, result, load_skin(skin_path) if skin_path else None, units,
+                                              int(influences))
         extra = {glb_path.name: glb_bytes, weights_path.name: npz_bytes_}
         outputs.update(glb=glb_path.name, weights=weights_path.name, units=how)
         result.timings["glb"] = time.perf_counter() - started_glb

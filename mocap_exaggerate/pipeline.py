@@ -605,7 +605,42 @@ def manifest(
     return info
 
 
-def make_glb(motion: Motion, result: PipelineResult, skin=None, units: str = "auto") -> tuple[bytes, bytes, str]:
+def output_thickness(result: PipelineResult) -> np.ndarray | None:
+    """World scale ``(F, J_out)`` per output joint for volume preservation, or None without a stretch pass.
+
+    A joint's bone runs to its child: a sub-joint takes the stretch of the link
+    it lies on, an original joint the largest stretch among its outgoing links;
+    thickness is ``1 / sqrt(stretch)``.
+    """
+    if result.stretch is None:
+        return None
+    factors = result.stretch.stretch_factors  # (F, J): the link ending at each original joint
+    skeleton = result.motion.skeleton
+    hierarchy = result.hierarchy
+    parents = _original_parents(result)
+    outgoing = np.ones_like(factors)
+    for child in range(1, factors.shape[1]):
+        outgoing[:, parents[child]] = np.maximum(outgoing[:, parents[child]], factors[:, child])
+    if hierarchy is not None and skeleton is hierarchy.skeleton:
+        between = hierarchy.fraction < 1.0
+        stretch = np.where(between[None, :], factors[:, hierarchy.link_child], outgoing[:, hierarchy.link_child])
+    else:
+        stretch = outgoing
+    return 1.0 / np.sqrt(np.maximum(stretch, 1e-6))
+
+
+def _original_parents(result: PipelineResult) -> np.ndarray:
+    hierarchy = result.hierarchy
+    if hierarchy is not None:
+        parents = np.full(len(hierarchy.original), -1)
+        originals = hierarchy.is_original
+        parents[hierarchy.link_child[originals]] = hierarchy.link_parent[originals]
+        return parents
+    return np.asarray(result.motion.skeleton.parents)
+
+
+def make_glb(motion: Motion, result: PipelineResult, skin=None, units: str = "auto",
+             influences: int = 4) -> tuple[bytes, bytes, str]:
     """The skinned GLB of a run, its skin as ``.npz`` bytes, and how the units were decided.
 
     skin : a `Skin` bound to ``motion``'s joints in its rest pose, or None for
@@ -622,12 +657,25 @@ def make_glb(motion: Motion, result: PipelineResult, skin=None, units: str = "au
     if skin is None:
         skin = default_skin(skeleton, hierarchy.rigid if hierarchy is not None else None)
     elif skin.bind:
-        raise ConfigError("the skin's bind pose is not the clip's rest pose; the GLB needs a skin bound in the "
-                          "BVH's rest pose (.npz)")
+        # A skin with its own bind pose must have been bound in the clip's rest pose.
+        rest = skeleton.rest_positions()
+        off = [np.linalg.norm(np.asarray(p) - rest[skeleton.index(n)]) for n, p in skin.bind.items()
+               if n in skeleton.names]
+        if not off or max(off) > 1e-3 * skeleton.height():
+            raise ConfigError("the skin's bind pose is not the clip's rest pose (joints up to "
+                              f"{max(off, default=float('nan')):.3g} units away); bind it in the BVH's rest pose")
+    if influences not in (4, 8):
+        raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
     if hierarchy is not None and result.motion.skeleton is hierarchy.skeleton:
-        skin = reweight(skin, skeleton, hierarchy)
+        skin = reweight(skin, skeleton, hierarchy, max_influences=influences)
+    elif skin.joints.shape[1] > influences:
+        from .io.skin import top_influences
+
+        rows = np.repeat(np.arange(skin.num_vertices), skin.joints.shape[1])
+        joints, weights = top_influences(rows, skin.joints.ravel(), skin.weights.ravel(), skin.num_vertices, influences)
+        skin = type(skin)(skin.vertices, skin.faces, skin.joint_names, joints, weights, skin.bind)
     scale, how = unit_scale(units, skeleton.height())
-    glb = format_glb(result.motion, skin, meters_per_unit=scale)
+    glb = format_glb(result.motion, skin, meters_per_unit=scale, thickness=output_thickness(result))
     weights = npz_bytes(joint_names=np.array(skin.joint_names), joints=skin.joints, weights=skin.weights,
                         vertices=skin.vertices, faces=skin.faces)
     return glb, weights, how

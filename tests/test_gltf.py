@@ -13,11 +13,13 @@ import pygltflib
 import pytest
 import trimesh
 
+from mocap_exaggerate.errors import ConfigError
+
 from mocap_exaggerate.io.gltf import unit_scale
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.skin import Skin, load_skin
 from mocap_exaggerate.pipeline import load_preset, make_glb, resolve_config, run
-from mocap_exaggerate.rotations import quat_rotate
+from mocap_exaggerate.rotations import quat_mul, quat_rotate
 from mocap_exaggerate.stages.body import default_skin
 from mocap_exaggerate.stages.reweight import reweight, segment_distance, subjoint_bind_positions
 from mocap_exaggerate.stages.subjoints import build_hierarchy
@@ -164,3 +166,93 @@ def test_makehuman_skin_reweights_fast_and_sensibly():
     assert np.median(distance) < 0.05 * np.ptp(skin.vertices[:, 1])  # strongest joint is close by
     used = {out.joint_names[j] for j in np.unique(out.joints[out.weights > 0])}
     assert any(name.startswith("upperarm02.L_s") for name in used)
+
+
+def animation_at(glb: bytes, frame: int):
+    """Each node's translation, rotation and (uniform) scale at a frame, from the GLB's own samplers."""
+    gltf = pygltflib.GLTF2.load_from_bytes(glb)
+    blob = gltf.binary_blob()
+
+    def read(index, width):
+        accessor = gltf.accessors[index]
+        view = gltf.bufferViews[accessor.bufferView]
+        return np.frombuffer(blob, dtype=np.float32, count=accessor.count * width, offset=view.byteOffset).reshape(-1, width)
+
+    count = len(gltf.skins[0].joints)
+    translation = np.array([gltf.nodes[j].translation for j in range(count)], dtype=np.float64)
+    rotation = np.tile([0.0, 0.0, 0.0, 1.0], (count, 1))
+    scale = np.ones(count)
+    animation = gltf.animations[0]
+    for channel in animation.channels:
+        sampler = animation.samplers[channel.sampler]
+        width = {"translation": 3, "rotation": 4, "scale": 3}[channel.target.path]
+        value = read(sampler.output, width)[frame].astype(np.float64)
+        if channel.target.path == "translation":
+            translation[channel.target.node] = value
+        elif channel.target.path == "rotation":
+            rotation[channel.target.node] = value
+        else:
+            assert np.allclose(value, value[0])  # uniform: children are never sheared
+            scale[channel.target.node] = value[0]
+    children = {j: gltf.nodes[j].children or [] for j in range(count)}
+    return translation, rotation, scale, children
+
+
+@needs_validator
+def test_volume_preserving_scale_keeps_every_joint_in_place(tmp_path):
+    motion, _ = read_bvh(shared("assimp_boxing_toes.bvh"))
+    config = resolve_config("cartoon", "[[stretch]]\nlimb = 'right_arm'\nstart = 1230\nend = 1251\nscale = 3.0\naxes = 'xz'\n")
+    result = run(motion, config)
+    glb, _, _ = make_glb(motion, result)
+    report = validate(glb, tmp_path)
+    assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0
+    meters = unit_scale("auto", motion.skeleton.height())[0]
+    translation, rotation, scale, children = animation_at(glb, 1251)
+    parents = result.motion.skeleton.parents
+    world_pos = np.zeros_like(translation)
+    world_rot = np.zeros_like(rotation)
+    world_scale = np.ones(len(scale))
+    world_pos[0], world_rot[0], world_scale[0] = translation[0], rotation[0], scale[0]
+    for j in range(1, len(scale)):
+        p = parents[j]
+        world_pos[j] = world_pos[p] + quat_rotate(world_rot[p], world_scale[p] * translation[j])
+        world_rot[j] = quat_mul(world_rot[p], rotation[j])
+        world_scale[j] = world_scale[p] * scale[j]
+    assert np.max(np.abs(world_pos - result.world_positions[1251] * meters)) < 1e-4
+    # The stretched arm is thinner, the rest of the body is not.
+    names = result.motion.skeleton.names
+    arm = [k for k, n in enumerate(names) if n.startswith("RightElbow_s")]
+    assert np.all(world_scale[arm] < 0.95)
+    assert world_scale[names.index("LeftElbow")] == pytest.approx(1.0)
+
+
+@needs_validator
+def test_eight_influences_and_a_glb_skin(sample_clip, tmp_path):
+    motion, _ = read_bvh(sample_clip)
+    original = run(motion, resolve_config("cartoon", None, {"output": {"skeleton": "original"}}))
+    glb, _, _ = make_glb(motion, original, units="m")
+    skin_file = tmp_path / "character.glb"
+    skin_file.write_bytes(glb)
+    skin = load_skin(skin_file)
+    assert len(skin.joint_names) == motion.skeleton.num_joints and len(skin.bind) == motion.skeleton.num_joints
+    rubber = run(motion, load_preset("cartoon"))
+    glb8, _, _ = make_glb(motion, rubber, skin, "m", influences=8)
+    report = validate(glb8, tmp_path)
+    assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0
+    gltf = pygltflib.GLTF2.load_from_bytes(glb8)
+    attributes = gltf.meshes[0].primitives[0].attributes
+    assert getattr(attributes, "JOINTS_1", None) is not None and getattr(attributes, "WEIGHTS_1", None) is not None
+    back = load_skin_bytes(glb8, tmp_path)
+    assert back.joints.shape[1] == 8 and np.allclose(back.weights.sum(axis=1), 1.0, atol=1e-6)
+    assert (back.weights > 0).sum(axis=1).max() > 4
+    # A skin bound in another pose (or other units) is refused, naming the problem.
+    if (SHARED_BVH.parent / "skin").is_dir():
+        makehuman = load_skin(SHARED_BVH.parent / "skin" / "makehuman_base.obj")
+        with pytest.raises(ConfigError, match="bind pose is not the clip's rest pose"):
+            make_glb(motion, rubber, makehuman, "cm")
+
+
+def load_skin_bytes(glb: bytes, folder: Path):
+    path = folder / "back.glb"
+    path.write_bytes(glb)
+    return load_skin(path)

@@ -2,7 +2,8 @@
 
 One node per joint (rest translation = the BVH offset, identity rotation,
 exactly the BVH's rest pose), one skin whose inverse bind matrices undo the
-rest pose, the mesh with POSITION, NORMAL, JOINTS_0 and WEIGHTS_0, and one
+rest pose, the mesh with POSITION, NORMAL, JOINTS_0 and WEIGHTS_0 (and a
+second set for 8 influences), and one
 animation with a translation and a rotation sampler per joint (6-DOF, as the
 BVH). Units are metres; BVH units are given or guessed from the skeleton's
 height.
@@ -89,11 +90,17 @@ def _weights_for_gltf(weights: np.ndarray) -> np.ndarray:
     return w
 
 
-def format_glb(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name: str = "mocap_exaggerate") -> bytes:
+def format_glb(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name: str = "mocap_exaggerate",
+               thickness: np.ndarray | None = None) -> bytes:
     """The whole GLB as bytes.
 
     motion : the output Motion (its skeleton is the one the skin is bound to)
     skin : bound to ``motion.skeleton``'s joints by name, in its rest pose
+    thickness : (F, J) float64 or None, the world scale wanted for each joint
+        (volume preservation: 1/sqrt(stretch)). Written as uniform node
+        scales with each child's translation divided by its parent's world
+        scale, so every joint stays exactly where the BVH puts it and children
+        are never sheared; the mesh around a thinner joint shrinks about it.
     """
     skeleton = motion.skeleton
     index = {n: j for j, n in enumerate(skeleton.names)}
@@ -132,15 +139,25 @@ def format_glb(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
     positions = (skin.vertices * scale).astype(np.float32)
     normals = np.asarray(mesh.vertex_normals, dtype=np.float32)
     remap = np.array([index[n] for n in skin.joint_names], dtype=np.int64)
-    weights = _weights_for_gltf(skin.weights[:, :4])
-    joints = np.where(weights > 0, remap[skin.joints[:, :4]], 0)
+    sets = 2 if skin.weights.shape[1] > 4 else 1  # 8 influences need a second JOINTS/WEIGHTS pair
+    columns = 4 * sets
+    raw = np.zeros((skin.num_vertices, columns))
+    ids = np.zeros((skin.num_vertices, columns), dtype=np.int64)
+    raw[:, : skin.weights.shape[1]] = skin.weights[:, :columns]
+    ids[:, : skin.joints.shape[1]] = skin.joints[:, :columns]
+    weights = _weights_for_gltf(raw)
+    joints = np.where(weights > 0, remap[ids], 0)
     joint_type, joint_dtype = (gl.UNSIGNED_BYTE, np.uint8) if skeleton.num_joints <= 255 else (gl.UNSIGNED_SHORT, np.uint16)
     attributes = gl.Attributes(
         POSITION=buffer.add(positions, "VEC3", gl.FLOAT, target=gl.ARRAY_BUFFER, bounds=True),
         NORMAL=buffer.add(normals, "VEC3", gl.FLOAT, target=gl.ARRAY_BUFFER),
-        JOINTS_0=buffer.add(joints.astype(joint_dtype), "VEC4", joint_type, target=gl.ARRAY_BUFFER),
-        WEIGHTS_0=buffer.add(weights, "VEC4", gl.FLOAT, target=gl.ARRAY_BUFFER),
     )
+    for number in range(sets):
+        part = slice(4 * number, 4 * number + 4)
+        setattr(attributes, f"JOINTS_{number}",
+                buffer.add(joints[:, part].astype(joint_dtype), "VEC4", joint_type, target=gl.ARRAY_BUFFER))
+        setattr(attributes, f"WEIGHTS_{number}",
+                buffer.add(np.ascontiguousarray(weights[:, part]), "VEC4", gl.FLOAT, target=gl.ARRAY_BUFFER))
     vertex_index = gl.UNSIGNED_INT if len(positions) > 65535 else gl.UNSIGNED_SHORT
     index_dtype = np.uint32 if vertex_index == gl.UNSIGNED_INT else np.uint16
     indices = buffer.add(skin.faces.astype(index_dtype).reshape(-1), "SCALAR", vertex_index,
@@ -152,10 +169,21 @@ def format_glb(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
     time_accessor = buffer.add(times, "SCALAR", gl.FLOAT, bounds=True)
     rotations = quat_unroll(motion.local_rotations, axis=0)
     rotations = (rotations / np.linalg.norm(rotations, axis=-1, keepdims=True)).astype(np.float32)
-    translations = (motion.local_positions * scale).astype(np.float32)
+    translations = motion.local_positions * scale
+    node_scale = None
+    if thickness is not None:
+        thickness = np.asarray(thickness, dtype=np.float64)
+        parent_world = np.ones_like(thickness)
+        parent_world[:, 1:] = thickness[:, skeleton.parents[1:]]
+        translations = translations / parent_world[..., None]
+        node_scale = thickness / parent_world
+    translations = translations.astype(np.float32)
     samplers, channels = [], []
     for j in range(skeleton.num_joints):
-        for path, values, kind in (("translation", translations[:, j], "VEC3"), ("rotation", rotations[:, j], "VEC4")):
+        tracks = [("translation", translations[:, j], "VEC3"), ("rotation", rotations[:, j], "VEC4")]
+        if node_scale is not None and np.any(np.abs(node_scale[:, j] - 1.0) > 1e-6):
+            tracks.append(("scale", np.repeat(node_scale[:, j, None], 3, axis=1).astype(np.float32), "VEC3"))
+        for path, values, kind in tracks:
             output = buffer.add(values, kind, gl.FLOAT)
             samplers.append(gl.AnimationSampler(input=time_accessor, output=output, interpolation="LINEAR"))
             channels.append(gl.AnimationChannel(sampler=len(samplers) - 1,

@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import InputError
 from .files import atomic_write
 
-__all__ = ["Skin", "load_skin", "load_npz_skin", "load_makehuman_skin", "skin_to_npz", "npz_bytes", "top_influences"]
+__all__ = ["Skin", "load_skin", "load_npz_skin", "load_gltf_skin", "load_makehuman_skin", "skin_to_npz", "npz_bytes", "top_influences"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,16 +178,78 @@ def _read_obj_group(path: Path, group: str) -> tuple[np.ndarray, np.ndarray]:
     return np.array(vertices, dtype=np.float64), np.array(faces, dtype=np.int64)
 
 
+def load_gltf_skin(path: str | os.PathLike) -> Skin:
+    """The first skinned mesh of a glTF/GLB file, its joints named by their nodes.
+
+    The bind pose is the mesh as stored; ``bind`` holds each joint's bind
+    position from its inverse bind matrix.
+    """
+    import pygltflib as gl
+
+    label = str(path)
+    try:
+        gltf = gl.GLTF2().load(str(path))
+    except Exception as error:  # pygltflib raises many kinds on bad files
+        raise InputError(f"not a readable glTF/GLB file ({type(error).__name__}: {error})", source=label) from None
+    blob = gltf.binary_blob() if str(path).lower().endswith(".glb") else None
+
+    def read(index: int) -> np.ndarray:
+        accessor = gltf.accessors[index]
+        view = gltf.bufferViews[accessor.bufferView]
+        data = blob if blob is not None else gltf.get_data_from_buffer_uri(gltf.buffers[view.buffer].uri)
+        width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}[accessor.type]
+        dtype = {gl.FLOAT: np.float32, gl.UNSIGNED_BYTE: np.uint8, gl.UNSIGNED_SHORT: np.uint16,
+                 gl.UNSIGNED_INT: np.uint32}[accessor.componentType]
+        item = np.dtype(dtype).itemsize * width
+        stride = view.byteStride or item
+        start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
+        raw = np.frombuffer(data, dtype=np.uint8, count=stride * (accessor.count - 1) + item, offset=start)
+        rows = np.lib.stride_tricks.as_strided(raw, shape=(accessor.count, item), strides=(stride, 1))
+        values = np.ascontiguousarray(rows).view(dtype).reshape(accessor.count, width)
+        if accessor.normalized and dtype != np.float32:
+            values = values / np.iinfo(dtype).max
+        return values
+
+    owner = next((n for n in gltf.nodes if n.mesh is not None and n.skin is not None), None)
+    if owner is None:
+        raise InputError("no skinned mesh in the file", source=label)
+    skin_def = gltf.skins[owner.skin]
+    names = tuple(gltf.nodes[j].name or f"joint{j}" for j in skin_def.joints)
+    primitive = gltf.meshes[owner.mesh].primitives[0]
+    attributes = primitive.attributes
+    if attributes.JOINTS_0 is None or attributes.WEIGHTS_0 is None:
+        raise InputError("the mesh has no JOINTS_0/WEIGHTS_0", source=label)
+    vertices = read(attributes.POSITION).astype(np.float64)
+    joints = [read(attributes.JOINTS_0)]
+    weights = [read(attributes.WEIGHTS_0)]
+    if getattr(attributes, "JOINTS_1", None) is not None and getattr(attributes, "WEIGHTS_1", None) is not None:
+        joints.append(read(attributes.JOINTS_1))
+        weights.append(read(attributes.WEIGHTS_1))
+    joints = np.concatenate(joints, axis=1).astype(np.int64)
+    weights = np.concatenate(weights, axis=1).astype(np.float64)
+    faces = read(primitive.indices).reshape(-1, 3) if primitive.indices is not None else np.arange(len(vertices)).reshape(-1, 3)
+    bind = {}
+    if skin_def.inverseBindMatrices is not None:
+        inverse = read(skin_def.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
+        for name, matrix in zip(names, inverse):
+            bind[name] = np.linalg.inv(matrix)[:3, 3]
+    rows = np.repeat(np.arange(len(vertices)), joints.shape[1])
+    top_j, top_w = top_influences(rows, joints.ravel(), weights.ravel(), len(vertices), 8)
+    return Skin(vertices, faces.astype(np.int64), names, top_j, top_w, bind)
+
+
 def load_skin(path: str | os.PathLike) -> Skin:
-    """A skin from ``.npz`` or a MakeHuman ``.obj`` (with its ``.mhw`` beside it)."""
+    """A skin from ``.npz``, a glTF/GLB skinned mesh, or a MakeHuman ``.obj`` (with its ``.mhw`` beside it)."""
     suffix = Path(path).suffix.lower()
     if not Path(path).exists():
         raise InputError("no such skin file", source=str(path))
     if suffix == ".npz":
         return load_npz_skin(path)
+    if suffix in (".glb", ".gltf"):
+        return load_gltf_skin(path)
     if suffix == ".obj":
         return load_makehuman_skin(path)
-    raise InputError("skins are read from .npz or a MakeHuman .obj (+ .mhw)", source=str(path))
+    raise InputError("skins are read from .npz, .glb/.gltf or a MakeHuman .obj (+ .mhw)", source=str(path))
 
 
 def skin_to_npz(skin: Skin, path: str | os.PathLike, *, overwrite: bool = False) -> None:
