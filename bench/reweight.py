@@ -5,7 +5,6 @@ Prints figures; run by hand: python bench/reweight.py
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -15,18 +14,10 @@ from mocap_exaggerate.io.skin import Skin, load_skin
 from mocap_exaggerate.stages.body import default_skin
 from mocap_exaggerate.stages.reweight import reweight
 from mocap_exaggerate.stages.subjoints import build_hierarchy
+from throughput import best_of as best  # same folder: run as python bench/reweight.py
 
 ROOT = Path(__file__).resolve().parent.parent
 SKIN = ROOT.parent / "shared" / "data" / "skin"
-
-
-def best(func, repeat=3):
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def main() -> None:

@@ -42,7 +42,7 @@ def tiled(path: Path, frames: int, folder: Path) -> Path:
     return out
 
 
-def best_of(func, repeat: int) -> float:
+def best_of(func, repeat: int = 3) -> float:
     times = []
     for _ in range(repeat):
         start = time.perf_counter()
