@@ -37,7 +37,9 @@ def test_exaggerate_writes_bvh_and_manifest(runner, sample_clip, tmp_path):
 def test_outputs_are_deterministic(runner, sample_clip, tmp_path):
     for folder in ("a", "b"):
         assert runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / folder)]).exit_code == 0
-    assert (tmp_path / "a" / "cmu_09_01_run_daz.bvh").read_bytes() == (tmp_path / "b" / "cmu_09_01_run_daz.bvh").read_bytes()
+    for suffix in (".bvh", ".glb", ".weights.npz"):
+        name = "cmu_09_01_run_daz" + suffix
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), suffix
     a = json.loads((tmp_path / "a" / "cmu_09_01_run_daz.json").read_text())
     b = json.loads((tmp_path / "b" / "cmu_09_01_run_daz.json").read_text())
     a.pop("timings"), b.pop("timings")
