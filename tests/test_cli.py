@@ -268,3 +268,24 @@ def test_preview_writes_a_png(runner, sample_clip, tmp_path):
     assert runner.invoke(cli, ["preview", str(sample_clip), "-o", str(tmp_path / "b.png"), "--frames", "3",
                                "--preset", "looney"]).exit_code == 0
     assert (tmp_path / "b.png").read_bytes() == data  # deterministic
+
+
+TINY = {
+    "root only": "ROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n}\n",
+    "root and End Site": "ROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+                         "  End Site\n  {\n    OFFSET 0 1 0\n  }\n}\n",
+}
+
+
+@pytest.mark.parametrize("name", sorted(TINY))
+@pytest.mark.parametrize("frames", [1, 3])
+def test_tiny_skeletons_and_single_frames_run_end_to_end(runner, tmp_path, name, frames):
+    rows = "\n".join(f"{k} 0 0 0 {5 * k} 0" for k in range(frames))
+    clip = tmp_path / "tiny.bvh"
+    clip.write_text(f"HIERARCHY\n{TINY[name]}MOTION\nFrames: {frames}\nFrame Time: 0.1\n{rows}\n")
+    result = runner.invoke(cli, ["exaggerate", str(clip), "-o", str(tmp_path / "out"), "--preset", "looney"])
+    assert result.exit_code == 0, result.output
+    motion, _ = read_bvh(tmp_path / "out" / "tiny.bvh")
+    assert motion.num_frames == frames and np.all(np.isfinite(motion.world_positions()))
+    assert (tmp_path / "out" / "tiny.glb").stat().st_size > 1000
+    assert runner.invoke(cli, ["preview", str(clip), "-o", str(tmp_path / "p.png")]).exit_code == 0

@@ -37,12 +37,16 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
         if rigid is None or not rigid[j]:
             heads.append(j)
             tails.append(skeleton.num_joints + k)
-    heads, tails = np.array(heads), np.array(tails)
+    heads, tails = np.array(heads, dtype=np.int64), np.array(tails, dtype=np.int64)
     lengths = np.linalg.norm(points[tails] - points[heads], axis=1)
     keep = lengths > 1e-4 * height  # short links still get a (round) capsule: no gaps at the joints
     heads, tails, lengths = heads[keep], tails[keep], lengths[keep]
     radii = np.clip(0.22 * lengths, 0.025 * height, 0.05 * height)
     capsules = [_capsule(points[a], points[b], r) for a, b, r in zip(heads, tails, radii)]
+    if not capsules:  # a skeleton with no link at all: a ball on the root
+        capsules = [trimesh.creation.icosphere(subdivisions=2, radius=0.05 * max(height, 1e-3))]
+        capsules[0].apply_translation(rest[0])
+        heads, tails, radii = np.array([0]), np.array([0]), np.array([0.05 * max(height, 1e-3)])
     body = trimesh.boolean.union(capsules, engine="manifold") if len(capsules) > 1 else capsules[0]
     vertices = np.asarray(body.vertices, dtype=np.float64)
     faces = np.asarray(body.faces, dtype=np.int64)

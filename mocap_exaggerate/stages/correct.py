@@ -124,9 +124,11 @@ def correct(
         raise ValueError(f"positions must be (F, {len(parents)}, 3), got {world_pos.shape}")
     if not 0 < delta <= 1:
         raise ValueError(f"delta must be in (0, 1], got {delta}")
+    out = world_pos.copy()
+    if float(np.sum(rest_lengths[1:])) <= 0:
+        return out, CorrectReport(0, 0, 0.0, 0.0, 0)  # no link to over-stretch
     total = _total_length(rest_lengths)
     num_joints = len(parents)
-    out = world_pos.copy()
     x, vec, length = _excess(world_pos, parents, rest_lengths, max_stretch)
     errors = x.sum(axis=1) / total
     active = np.flatnonzero(errors > threshold)
