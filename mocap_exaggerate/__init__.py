@@ -1,7 +1,9 @@
 """mocap_exaggerate: turn realistic motion capture into cartoon-style motion.
 
->>> from mocap_exaggerate import load_bvh, exaggerate, save_bvh  # doctest: +SKIP
->>> save_bvh(exaggerate(load_bvh("walk.bvh"), preset="looney"), "walk_looney.bvh")  # doctest: +SKIP
+Example::
+
+    from mocap_exaggerate import load_bvh, exaggerate, save_bvh
+    save_bvh(exaggerate(load_bvh("walk.bvh"), preset="looney"), "walk_looney.bvh")
 """
 
 __version__ = "0.1.0"

@@ -539,8 +539,10 @@ def _max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.nd
 def exaggerate(motion: Motion, config: PipelineConfig | None = None, **preset: Any) -> Motion:
     """Exaggerate a clip with ``config`` (default: the `DEFAULT_PRESET` preset); the output Motion.
 
-    >>> from mocap_exaggerate import load_bvh, exaggerate, save_bvh  # doctest: +SKIP
-    >>> save_bvh(exaggerate(load_bvh("walk.bvh")), "walk_cartoon.bvh")  # doctest: +SKIP
+    Example::
+
+        from mocap_exaggerate import load_bvh, exaggerate, save_bvh
+        save_bvh(exaggerate(load_bvh("walk.bvh")), "walk_cartoon.bvh")
     """
     if config is None:
         config = load_preset(preset.pop("preset", DEFAULT_PRESET))
