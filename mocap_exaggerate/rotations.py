@@ -23,11 +23,8 @@ import numba
 import numpy as np
 
 __all__ = [
-    "quat_identity",
     "quat_mul",
     "quat_inv",
-    "quat_inv_mul",
-    "quat_inv_rotate",
     "quat_rotate",
     "quat_slerp",
     "quat_normalize",
@@ -37,13 +34,6 @@ __all__ = [
     "quat_to_euler",
     "quat_unroll",
 ]
-
-
-def quat_identity(shape: tuple[int, ...] = ()) -> np.ndarray:
-    """Identity quaternions of the given leading shape, ``shape + (4,)``."""
-    q = np.zeros(shape + (4,))
-    q[..., 3] = 1.0
-    return q
 
 
 @numba.njit(cache=True, inline="always")
@@ -67,11 +57,10 @@ def _rotate_into(ux, uy, uz, w, v, out):  # pragma: no cover - compiled
 
 @numba.njit(cache=True)
 def _rows_kernel(kind, a, b, out):  # pragma: no cover - compiled
-    """Row by row: 0 a*b, 1 inv(a)*b, 2 rotate b by a, 3 rotate b by inv(a)."""
-    sign = -1.0 if kind == 1 or kind == 3 else 1.0
+    """Row by row: 0 a*b, 1 rotate b by a."""
     for i in range(a.shape[0]):
-        x, y, z, w = sign * a[i, 0], sign * a[i, 1], sign * a[i, 2], a[i, 3]
-        if kind < 2:
+        x, y, z, w = a[i, 0], a[i, 1], a[i, 2], a[i, 3]
+        if kind == 0:
             _mul_into(x, y, z, w, b[i], out[i])
         else:
             _rotate_into(x, y, z, w, b[i], out[i])
@@ -122,16 +111,6 @@ def _rows(kind: int, a: np.ndarray, b: np.ndarray, width: int) -> np.ndarray:
     return out.reshape(lead + (width,))
 
 
-def quat_inv_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``inverse(a) * b`` for unit quaternions: the rotation from frame ``a`` to ``b``."""
-    return _rows(1, a, b, 4)
-
-
-def quat_inv_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors ``v (..., 3)`` by the inverse of unit quaternions ``q (..., 4)``."""
-    return _rows(3, q, v, 3)
-
-
 def quat_slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarray:
     """Spherical interpolation from ``a`` (t = 0) to ``b`` (t = 1) along the shorter arc.
 
@@ -167,7 +146,7 @@ def quat_inv(q: np.ndarray) -> np.ndarray:
 
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)``, broadcasting."""
-    return _rows(2, q, v, 3)
+    return _rows(1, q, v, 3)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

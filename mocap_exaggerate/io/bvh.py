@@ -141,8 +141,6 @@ def read_bvh(
                     source=label,
                     line=line_no,
                 )
-            frame_time_line = line_no
-    del frame_time_line
     report.declared_frames = declared_frames
     report.header_fps = 1.0 / frame_time if frame_time and frame_time > 0 else 0.0
     if declared_frames == 0:
@@ -302,7 +300,6 @@ def _parse_header(text: str, label: str) -> Skeleton:
         return len(names) - 1
 
     stack = [open_joint(-1, line)]
-    root_line = line
     while stack:
         joint = stack[-1]
         token, line = tokens.next(f"'}}' closing joint {names[joint]!r}")
@@ -368,7 +365,6 @@ def _parse_header(text: str, label: str) -> Skeleton:
         if leftover.upper() == "ROOT":
             raise tokens.error("several ROOT hierarchies in one file are not supported", line)
         raise tokens.error(f"unexpected {leftover[:40]!r} after the hierarchy (unbalanced '}}'?)", line)
-    del root_line
     return Skeleton(tuple(names), np.array(parents), np.array(offsets), tuple(channels), np.array(end_sites))
 
 

@@ -2,7 +2,7 @@
 
 from .correct import CorrectConfig, CorrectReport, correct, stretch_error
 from .extrapolate import ExtrapolateConfig, extrapolate, gaussian_average, parse_duration
-from .orient import motion_from_world, positions_to_motion, recover_orientations
+from .orient import motion_from_world, recover_orientations
 from .springs import SpringConfig, simulate_springs
 from .subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints
 from .tpose import detect_rest_frames
@@ -22,7 +22,6 @@ __all__ = [
     "motion_from_world",
     "parse_duration",
     "position_subjoints",
-    "positions_to_motion",
     "recover_orientations",
     "simulate_springs",
     "stretch_error",

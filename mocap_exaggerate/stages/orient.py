@@ -25,24 +25,7 @@ from ..motion import Motion
 from ..rotations import _cross, quat_mul, quat_normalize, quat_rotate, quat_slerp, slerp_into
 from .subjoints import SubjointHierarchy
 
-__all__ = ["positions_to_motion", "recover_orientations", "quat_between", "quat_slerp", "motion_from_world"]
-
-
-def positions_to_motion(world_pos: np.ndarray, source: Motion, world_rot: np.ndarray | None = None) -> Motion:
-    """A 6-channel Motion on the source skeleton whose joints sit at ``world_pos``, orientations as captured.
-
-    world_pos : (F, J, 3) float64 target world positions, same F and J as ``source``
-    source : the captured Motion; its local rotations are kept
-    world_rot : (F, J, 4) float64, the source's world rotations if already computed
-    """
-    world_pos = np.asarray(world_pos, dtype=np.float64)
-    expected = source.local_positions.shape
-    if world_pos.shape != expected:
-        raise ValueError(f"positions must be {expected}, got {world_pos.shape}")
-    if world_rot is None:
-        world_rot = source.world_rotations()
-    return motion_from_world(world_pos, world_rot, source.skeleton.with_full_channels(), source.frame_time,
-                             source.euler_hint)
+__all__ = ["recover_orientations", "quat_between", "quat_slerp", "motion_from_world"]
 
 
 def motion_from_world(world_pos, world_rot, skeleton, frame_time, euler_hint=None) -> Motion:
