@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
-from mocap_exaggerate.pipeline import load_preset, resolve_config, run
+from mocap_exaggerate.config import load_preset, resolve_config
+from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.stages.subjoints import SubjointConfig, build_hierarchy
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -60,7 +61,7 @@ def measure(path: Path, preset: str, repeat: int, with_bvhio: bool) -> None:
     t_stages = best_of(lambda: run(motion, config), repeat)
     t_write = best_of(lambda: format_bvh(result.motion), repeat)
     with tempfile.TemporaryDirectory() as tmp:
-        command = [sys.executable, "-m", "cli.main", "-q", "exaggerate", str(path), "-o", tmp, "--overwrite",
+        command = [sys.executable, "-m", "mocap_exaggerate_cli.main", "-q", "exaggerate", str(path), "-o", tmp, "--overwrite",
                    "--preset", preset]
         t_command = best_of(lambda: subprocess.run(command, check=True, cwd=ROOT), repeat)
     print(f"{path.name}: {frames} frames, {joints} joints, preset {preset}")

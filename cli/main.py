@@ -9,32 +9,19 @@ import dataclasses
 import functools
 import json
 import logging
+import math
 import sys
-import time
 from pathlib import Path
 from typing import Any, Callable
 
 import click
-import numpy as np
 
+# Only light modules at import time: `--help` must not wait for SciPy, trimesh or pygltflib.
 from mocap_exaggerate import __version__
+from mocap_exaggerate.config import DEFAULT_PRESET, preset_description, preset_names, resolve_config
 from mocap_exaggerate.errors import MocapError
-from mocap_exaggerate.io.bvh import format_bvh, read_bvh
-from mocap_exaggerate.io.files import atomic_write
-from mocap_exaggerate.limbs import find_limbs
-from mocap_exaggerate.io.skin import load_skin
-from mocap_exaggerate.pipeline import (
-    DEFAULT_PRESET,
-    make_glb,
-    manifest,
-    preset_description,
-    preset_names,
-    resolve_config,
-    run,
-)
+from mocap_exaggerate.io.files import OutputExistsError
 from mocap_exaggerate.stages.stretch import parse_stretch
-from mocap_exaggerate.stages.subjoints import build_hierarchy
-from mocap_exaggerate.stages.tpose import detect_rest_frames
 
 log = logging.getLogger("mocap_exaggerate")
 
@@ -46,14 +33,22 @@ class UserError(click.ClickException):
 
 
 def _fail_cleanly(func: Callable) -> Callable:
-    """Turn library errors into one-line messages; never a traceback for a user mistake."""
+    """Turn library errors into one-line messages; never a traceback for a user mistake.
+
+    Exit codes: 2 for bad input or settings (and refusals), 1 for a failed
+    write or read the user did not cause by a setting.
+    """
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
         try:
             return func(*args, **kwargs)
+        except OutputExistsError as error:
+            raise UserError(f"{error}; pass --overwrite to replace it") from None
         except MocapError as error:
             raise UserError(str(error)) from None
+        except BrokenPipeError:
+            raise  # the reader went away (`| head`): click exits quietly
         except OSError as error:
             where = f"{error.filename}: " if getattr(error, "filename", None) else ""
             raise click.ClickException(f"{where}{error.strerror or error}") from None
@@ -78,7 +73,7 @@ def _parse_weights(ctx, param, values: tuple[str, ...]) -> tuple[tuple[str, floa
             weight = float(value)
         except ValueError:
             raise click.BadParameter(f"{item!r}: weight {value!r} is not a number") from None
-        if not np.isfinite(weight) or not 0 <= weight <= 10:
+        if not math.isfinite(weight) or not 0 <= weight <= 10:
             raise click.BadParameter(f"{item!r}: weight must be between 0 and 10")
         out.append((key.strip(), weight))
     return tuple(out)
@@ -192,14 +187,37 @@ def _config_from_options(p: dict[str, Any]):
     return preset, config
 
 
+def _set_verbosity(ctx: click.Context, param: click.Parameter, value: Any) -> None:
+    """``-v``/``-q`` may stand before or after the subcommand; both places add up."""
+    root = ctx.find_root()
+    state = root.meta.setdefault("mocap_exaggerate.verbosity", {"verbose": 0, "quiet": False})
+    if param.name == "verbose":
+        state["verbose"] += value or 0
+    elif value:
+        state["quiet"] = True
+    level = logging.ERROR if state["quiet"] else (logging.WARNING, logging.INFO, logging.DEBUG)[min(state["verbose"], 2)]
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
+
+
+def verbosity_options(func: Callable) -> Callable:
+    func = click.option("-q", "--quiet", is_flag=True, expose_value=False, callback=_set_verbosity,
+                        help="Only errors on stderr.")(func)
+    return click.option("-v", "--verbose", count=True, expose_value=False, callback=_set_verbosity,
+                        help="More detail on stderr (-vv for debugging).")(func)
+
+
+def _quiet() -> bool:
+    ctx = click.get_current_context(silent=True)
+    return bool(ctx and ctx.find_root().meta.get("mocap_exaggerate.verbosity", {}).get("quiet"))
+
+
 # ---------------------------------------------------------------------------- commands
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(__version__, prog_name="mocap-exaggerate")
-@click.option("-v", "--verbose", count=True, help="More detail on stderr (-vv for debugging).")
-@click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
-def cli(verbose: int, quiet: bool) -> None:
+@verbosity_options
+def cli() -> None:
     """Turn motion capture (BVH) into cartoon-style motion.
 
     \b
@@ -207,8 +225,6 @@ def cli(verbose: int, quiet: bool) -> None:
       mocap-exaggerate exaggerate sample_data/cmu_09_01_run_daz.bvh -o out/ --sigma 0.2s --omega 5
       mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs
     """
-    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
-    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
 
 
 @cli.command()
@@ -231,6 +247,7 @@ def cli(verbose: int, quiet: bool) -> None:
 @click.option("--path-file", "path_file", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Apply hand-edited paths: a --trails file whose 'exaggerated' points you moved.")
 @pipeline_options
+@verbosity_options
 @_fail_cleanly
 def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool, skin_path: Path | None,
                units: str, influences: str, write_glb: bool, trails_path: Path | None, path_file: Path | None, **options) -> None:
@@ -247,124 +264,39 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
       mocap-exaggerate exaggerate fight.bvh -o out/ --preset looney --auto-stretch -v
       cat walk.bvh | mocap-exaggerate exaggerate - -o - > walk_cartoon.bvh
     """
+    from mocap_exaggerate.job import convert
+
     preset, config = _config_from_options(options)
-    started = time.perf_counter()
-    if str(input_path) == "-":
-        data = sys.stdin.buffer.read()
-        label = "<stdin>"
-        stem = name or "stdin"
-    else:
-        try:
-            data = input_path.read_bytes()
-        except FileNotFoundError:
-            raise UserError(f"{input_path}: no such file") from None
-        except IsADirectoryError:
-            raise UserError(f"{input_path}: is a folder; give a .bvh file") from None
-        label = str(input_path)
-        stem = name or input_path.stem
-    motion, report = read_bvh(data, name=label, fps=config.input.fps)
-    read_seconds = time.perf_counter() - started
-    for warning in report.warnings:
-        log.warning("%s: %s", label, warning)
-
-    paths = _read_path_file(path_file) if path_file else None
-    result = run(motion, config, paths=paths)
-    for note in result.notes:
-        log.info("%s: %s", label, note)
-    if trails_path is not None:
-        if trails_path.exists() and not overwrite:
-            raise UserError(f"{trails_path} exists; pass --overwrite to replace it")
-        trails = {"input": label, "fps": motion.fps, "trails": result.stretch.trails if result.stretch else []}
-        atomic_write(trails_path, (json.dumps(trails, indent=1) + "\n").encode("utf-8"), overwrite=True)
-
-    started = time.perf_counter()
-    bvh_bytes = format_bvh(result.motion)
-    write_seconds = time.perf_counter() - started
-
-    if str(output) == "-":
-        sys.stdout.buffer.write(bvh_bytes)
-        sys.stdout.buffer.flush()
-        return
-
-    bvh_path = output / f"{stem}.bvh"
-    json_path = output / f"{stem}.json"
-    glb_path = output / f"{stem}.glb"
-    weights_path = output / f"{stem}.weights.npz"
-    if output.exists() and not output.is_dir():
-        raise UserError(f"{output}: exists and is not a folder")
-    written = [bvh_path, json_path] + ([glb_path, weights_path] if write_glb else [])
-    for path in written:
-        if str(input_path) != "-" and path.resolve() == input_path.resolve():
-            raise UserError(f"{path}: would overwrite the input; choose another -o folder or --name")
-        if path.exists() and not overwrite:
-            raise UserError(f"{path} exists; pass --overwrite to replace it")
-    extra: dict[str, bytes] = {}
-    outputs = {"bvh": bvh_path.name}
-    if write_glb:
-        started_glb = time.perf_counter()
-        glb_bytes, npz_bytes_, how = make_glb(motion, result, load_skin(skin_path) if skin_path else None, units,
-                                              int(influences))
-        extra = {glb_path.name: glb_bytes, weights_path.name: npz_bytes_}
-        outputs.update(glb=glb_path.name, weights=weights_path.name, units=how)
-        result.timings["glb"] = time.perf_counter() - started_glb
-    info = manifest(
-        input_name=label,
-        input_bytes=data,
-        config=config,
+    from_stdin = str(input_path) == "-"
+    record = convert(
+        sys.stdin.buffer if from_stdin else input_path,
+        sys.stdout.buffer if str(output) == "-" else output,
+        config,
         preset=preset,
-        result=result,
-        outputs=outputs,
-        read_seconds=read_seconds,
-        write_seconds=write_seconds,
-        reader_warnings=report.warnings,
-        frames_in=motion.num_frames,
-        fps=motion.fps,
+        name=name if name is not None or not from_stdin else "stdin",
+        label="<stdin>" if from_stdin else None,
+        overwrite=overwrite,
+        glb=write_glb,
+        skin=skin_path,
+        units=units,
+        influences=int(influences),
+        trails=trails_path,
+        path_file=path_file,
     )
-    started = time.perf_counter()
-    atomic_write(bvh_path, bvh_bytes, overwrite=True)
-    info["timings"]["write"] += time.perf_counter() - started
-    for file_name, data in extra.items():
-        atomic_write(output / file_name, data, overwrite=True)
-    atomic_write(json_path, (json.dumps(info, indent=2) + "\n").encode("utf-8"), overwrite=True)
-    total = sum(info["timings"].values())
-    if not _quiet():
+    for warning in record.warnings:
+        log.warning("%s: %s", record.input, warning)
+    for note in record.notes:
+        log.info("%s: %s", record.input, note)
+    if record.manifest is not None and not _quiet():
+        written = record.outputs
+        extras = ", ".join(p.suffix if k != "weights" else ".weights.npz" for k, p in written.items()
+                           if k in ("glb", "weights"))
         click.echo(
-            f"wrote {bvh_path}{', .glb, .weights.npz' if write_glb else ''} and {json_path.name}: "
-            f"{result.motion.num_frames} frames, "
-            f"{result.motion.skeleton.num_joints} joints, max link stretch {result.max_link_stretch:.2f}x, "
-            f"{total:.2f} s",
+            f"wrote {written['bvh']}{', ' + extras if extras else ''} and {written['manifest'].name}: "
+            f"{record.frames} frames, {record.joints} joints, max link stretch {record.max_link_stretch:.2f}x, "
+            f"{record.seconds:.2f} s",
             err=True,
         )
-
-
-def _read_path_file(path: Path) -> dict:
-    """Edited paths from a trails JSON file: limb -> (frames, positions)."""
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise UserError(f"{path}: no such path file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise UserError(f"{path}: not a JSON trails file ({error})") from None
-    paths = {}
-    for number, trail in enumerate(data.get("trails", []) if isinstance(data, dict) else [], start=1):
-        try:
-            frames = [int(f) for f in trail["frames"]]
-            points = np.asarray(trail["exaggerated"], dtype=np.float64)
-            limb = str(trail["limb"])
-        except (KeyError, TypeError, ValueError):
-            raise UserError(f"{path}: trail #{number} needs limb, frames and exaggerated points") from None
-        if points.shape != (len(frames), 3) or not np.all(np.isfinite(points)):
-            raise UserError(f"{path}: trail #{number} ({limb}) has {len(frames)} frames but points of shape "
-                            f"{points.shape}; expected one finite x, y, z per frame")
-        paths[limb] = (frames, points)
-    if not paths:
-        raise UserError(f"{path}: no trails in it")
-    return paths
-
-
-def _quiet() -> bool:
-    ctx = click.get_current_context(silent=True)
-    return bool(ctx and ctx.find_root().params.get("quiet"))
 
 
 @cli.command()
@@ -373,6 +305,7 @@ def _quiet() -> bool:
 @click.option("--groups", is_flag=True, help="Also list the rubber-joint groups and the joints that ride rigidly.")
 @click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
+@verbosity_options
 @_fail_cleanly
 def info(input_path: Path, limbs: bool, groups: bool, fps: float | None, as_json: bool) -> None:
     """Describe a clip: joints, channels, rotation orders, frames, fps, duration, height.
@@ -381,48 +314,23 @@ def info(input_path: Path, limbs: bool, groups: bool, fps: float | None, as_json
     Example:
       mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs --groups
     """
+    from mocap_exaggerate.job import describe
+
     label = "<stdin>" if str(input_path) == "-" else str(input_path)
-    motion, report = read_bvh(input_path, name=label, fps=fps)
-    skeleton = motion.skeleton
-    orders: dict[str, int] = {}
-    for j in range(skeleton.num_joints):
-        if skeleton.channels[j]:
-            orders[skeleton.rotation_order(j)] = orders.get(skeleton.rotation_order(j), 0) + 1
-    end_sites = int(np.isfinite(skeleton.end_sites[:, 0]).sum())
-    data: dict[str, Any] = {
-        "file": label,
-        "joints": skeleton.num_joints,
-        "end_sites": end_sites,
-        "channels": skeleton.num_channels,
-        "position_channel_joints": [skeleton.names[j] for j in range(skeleton.num_joints) if skeleton.has_position_channels(j)],
-        "rotation_orders": orders,
-        "frames": motion.num_frames,
-        "fps": round(motion.fps, 6),
-        "duration_s": round(motion.duration, 6),
-        "up_axis": "XYZ"[skeleton.up_axis()],
-        "height": round(skeleton.height(), 4),
-        "rest_frames": detect_rest_frames(motion),
-        "warnings": report.warnings,
-    }
-    if limbs:
-        data["limbs"] = {name: [skeleton.names[j] for j in limb.joints] for name, limb in find_limbs(skeleton).items()}
-    if groups:
-        hierarchy = build_hierarchy(skeleton)
-        data["groups"] = [[skeleton.names[j] for j in chain] for chain in hierarchy.groups]
-        data["rigid"] = [skeleton.names[j] for j in np.flatnonzero(hierarchy.rigid)]
-        data["subjoints"] = hierarchy.skeleton.num_joints
+    data = describe(input_path, fps=fps, limbs=limbs, groups=groups, label=label)
+    orders = data["rotation_orders"]
     if as_json:
         click.echo(json.dumps(data, indent=2))
         return
     click.echo(f"{label}")
-    click.echo(f"  joints      {data['joints']} (+{end_sites} End Sites), root {skeleton.names[0]}")
+    click.echo(f"  joints      {data['joints']} (+{data['end_sites']} End Sites), root {data['root']}")
     click.echo(f"  channels    {data['channels']}; position channels on {', '.join(data['position_channel_joints']) or 'none'}")
     click.echo(f"  rotation    {', '.join(f'{o} x{n}' for o, n in orders.items())}")
-    click.echo(f"  frames      {data['frames']} at {motion.fps:g} fps ({motion.duration:.3f} s)")
+    click.echo(f"  frames      {data['frames']} at {data['fps']:g} fps ({data['duration_s']:.3f} s)")
     click.echo(f"  height      {data['height']:g} units along {data['up_axis']} (rest pose)")
     if data["rest_frames"]:
         click.echo(f"  rest pose   {data['rest_frames']} leading synthetic frame(s) (see --tpose)")
-    for warning in report.warnings:
+    for warning in data["warnings"]:
         click.echo(f"  warning     {warning}")
     if limbs:
         for name, chain in data["limbs"].items():
@@ -439,12 +347,13 @@ def info(input_path: Path, limbs: bool, groups: bool, fps: float | None, as_json
 
 @cli.command()
 @click.argument("input_path", metavar="IN.bvh", type=click.Path(path_type=Path, allow_dash=True))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("-o", "--output", required=True, type=click.Path(path_type=Path),
               help="PNG file to write.")
 @click.option("--frames", "count", type=click.IntRange(1, 12), default=5, show_default=True,
               help="How many evenly spaced frames to show.")
 @click.option("--overwrite", is_flag=True, help="Replace the PNG if it exists.")
 @pipeline_options
+@verbosity_options
 @_fail_cleanly
 def preview(input_path: Path, output: Path, count: int, overwrite: bool, **options) -> None:
     """Render the skinned body, captured above and exaggerated below, to a PNG (no GPU, no display).
@@ -453,20 +362,18 @@ def preview(input_path: Path, output: Path, count: int, overwrite: bool, **optio
     Example:
       mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o run.png --preset looney
     """
-    from mocap_exaggerate.preview import render_preview
+    from mocap_exaggerate.preview import write_preview
 
-    preset, config = _config_from_options(options)
-    if output.exists() and not overwrite:
-        raise UserError(f"{output} exists; pass --overwrite to replace it")
-    label = "<stdin>" if str(input_path) == "-" else str(input_path)
-    motion, _ = read_bvh(input_path, name=label, fps=config.input.fps)
-    result = run(motion, config)
-    atomic_write(output, render_preview(motion, result, frames=count), overwrite=True)
+    _, config = _config_from_options(options)
+    from_stdin = str(input_path) == "-"
+    write_preview(sys.stdin.buffer if from_stdin else input_path, output, config, frames=count, overwrite=overwrite,
+                  label="<stdin>" if from_stdin else None)
     if not _quiet():
         click.echo(f"wrote {output}", err=True)
 
 
 @cli.command()
+@verbosity_options
 def presets() -> None:
     """List the shipped presets and what they do.
 

@@ -2,29 +2,51 @@
 
 Example::
 
-    from mocap_exaggerate import load_bvh, exaggerate, save_bvh
+    from mocap_exaggerate import convert, load_bvh, exaggerate, save_bvh
+    convert("walk.bvh", "out/")                       # the whole job: BVH, GLB, weights, manifest
     save_bvh(exaggerate(load_bvh("walk.bvh"), preset="looney"), "walk_looney.bvh")
+
+Names are imported on first use, so ``import mocap_exaggerate`` (and the
+command line's ``--help``) stays quick.
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 __version__ = "0.1.0"
 
-from .errors import ConfigError, InputError, MocapError  # noqa: E402
-from .io.bvh import load_bvh, read_bvh, save_bvh  # noqa: E402
-from .motion import Motion  # noqa: E402
-from .pipeline import PipelineConfig, exaggerate, load_preset, run  # noqa: E402
-from .skeleton import Skeleton  # noqa: E402
+#: Public name -> module that defines it.
+_EXPORTS = {
+    "ConfigError": "errors",
+    "InputError": "errors",
+    "MocapError": "errors",
+    "Motion": "motion",
+    "Skeleton": "skeleton",
+    "PipelineConfig": "config",
+    "load_preset": "config",
+    "resolve_config": "config",
+    "load_bvh": "io.bvh",
+    "read_bvh": "io.bvh",
+    "save_bvh": "io.bvh",
+    "run": "pipeline",
+    "exaggerate": "pipeline",
+    "convert": "job",
+    "JobRecord": "job",
+    "describe": "job",
+}
 
-__all__ = [
-    "ConfigError",
-    "InputError",
-    "MocapError",
-    "Motion",
-    "PipelineConfig",
-    "Skeleton",
-    "exaggerate",
-    "load_bvh",
-    "load_preset",
-    "read_bvh",
-    "run",
-    "save_bvh",
-]
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + __all__)

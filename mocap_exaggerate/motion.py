@@ -6,7 +6,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .rotations import quat_mul, quat_rotate
+from .kinematics import forward_kinematics
 from .skeleton import Skeleton
 
 __all__ = ["Motion"]
@@ -87,16 +87,7 @@ class Motion:
 
         Loops over joints; every frame is handled at once.
         """
-        parents = self.skeleton.parents
-        world_rot = np.empty_like(self.local_rotations)
-        world_pos = np.empty_like(self.local_positions)
-        world_rot[:, 0] = self.local_rotations[:, 0]
-        world_pos[:, 0] = self.local_positions[:, 0]
-        for j in range(1, self.skeleton.num_joints):
-            p = parents[j]
-            world_rot[:, j] = quat_mul(world_rot[:, p], self.local_rotations[:, j])
-            world_pos[:, j] = world_pos[:, p] + quat_rotate(world_rot[:, p], self.local_positions[:, j])
-        return world_rot, world_pos
+        return forward_kinematics(self.skeleton.parents, self.local_rotations, self.local_positions)
 
     def world_positions(self) -> np.ndarray:
         """(F, J, 3) float64 world position of every joint."""

@@ -1,313 +1,372 @@
-"""The pipeline: stage configs composed into one declaration, presets, and `run`.
+"""The pipeline: the declared list of stages and the loop that runs it.
 
-A pipeline is the ordered list of blocks that are switched on. Its whole
-declaration is a `PipelineConfig`, which round-trips through TOML; the same
-declaration and input give the same output, byte for byte.
+A stage is a name, a pure function ``(State, settings) -> State`` and a
+function that picks the stage's settings out of a `PipelineConfig` (None
+when the stage is switched off). `STAGES` is the order; `run` loops over it
+and records which stages ran, so the manifest says exactly what was done.
+Adding a stage is one function and one line in `STAGES`.
+
+Leading synthetic rest frames (a T-pose and its settling frames) are found
+before the stages run; the stages that filter in time see only the frames
+after them, and they are written back as captured.
 """
 
 from __future__ import annotations
 
-import copy
-import hashlib
-import logging
+import functools
 import time
-import tomllib
-from dataclasses import asdict, dataclass, field, fields
-from importlib import resources
-from typing import Any
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
-import tomli_w
 
-from . import __version__
-from .errors import ConfigError, check_number
+from .config import DEFAULT_PRESET, InputConfig, PipelineConfig, load_preset
+from .errors import ConfigError
 from .limbs import LIMB_NAMES, find_limbs, limb_joints
 from .motion import Motion
 from .skeleton import Skeleton
-from .stages.correct import CorrectConfig, CorrectReport, correct
-from .stages.extrapolate import ExtrapolateConfig, extrapolate
+from .stages.correct import CorrectReport, correct
+from .stages.extrapolate import extrapolate
 from .stages.orient import motion_from_world, recover_orientations
-from .stages.springs import SpringConfig, simulate_springs, spring_substeps
-from .stages.stretch import AutoStretchConfig, StretchResult, StretchSpec, apply_stretches, find_strikes
+from .stages.springs import simulate_springs, spring_links, substeps_for
+from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping
 from .stages.subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints
-from .stages.tpose import detect_rest_frames
+from .tpose import detect_rest_frames
 
 __all__ = [
-    "InputConfig",
-    "PipelineConfig",
+    "State",
+    "Stage",
+    "STAGES",
     "PipelineResult",
-    "DEFAULT_PRESET",
-    "preset_names",
-    "load_preset",
-    "preset_description",
-    "resolve_config",
-    "resolve_weights",
+    "prepare",
     "run",
     "exaggerate",
     "pipeline_limbs",
-    "make_glb",
-    "STAGES",
+    "resolve_weights",
+    "max_link_stretch",
 ]
 
-log = logging.getLogger(__name__)
 
-DEFAULT_PRESET = "cartoon"
-#: Blocks in the order they run.
-STAGES = ("extrapolate", "correct", "stretch", "subjoints", "springs")
-_TPOSE_MODES = ("auto", "keep", "drop")
-_SKELETON_MODES = ("sub", "original")
+class Output(NamedTuple):
+    """The output skeleton's motion and the world transforms its FK reproduces."""
+
+    motion: Motion
+    world_positions: np.ndarray  # (F, J_out, 3)
+    world_rotations: np.ndarray  # (F, J_out, 4)
+    original_index: np.ndarray  # (J,) where each original joint is in the output skeleton
 
 
-@dataclass(frozen=True, kw_only=True)
-class InputConfig:
-    """How the clip is read.
+@dataclass(frozen=True)
+class State:
+    """What flows from stage to stage. Stages return a new State (``dataclasses.replace``).
 
-    tpose : ``auto`` detects a synthetic leading rest pose, keeps it out of
-        every filter and writes it back unchanged; ``keep`` treats it as
-        motion; ``drop`` removes it from the output.
-    fps : frame rate overriding the header's ``Frame Time`` (None keeps it).
+    motion : the captured clip (rest frames removed with ``tpose = "drop"``)
+    captured_rot, captured_pos : (F, J, 4) and (F, J, 3) its world transforms
+    rest_frames : leading frames kept out of every filter and written as captured
+    limbs : limb name -> `Limb`, found on the skeleton (the config's ``[limbs]`` win)
+    positions : (F, J, 3) float64 working positions of the original joints
+    paths : limb -> (frames, points), hand-edited end-effector paths, or None
+    hierarchy : the sub-joint hierarchy, once the subjoints stage has run
+    sub_positions : (F, J', 3) positions on the rubber skeleton, once a stage made them
+    output : the output Motion and its world transforms, once orient has run
+    findings : per-stage facts for the manifest (correct report, stretch result, substeps)
+    notes : things the user should hear about, in the order they happened
     """
 
-    tpose: str = "auto"
-    fps: float | None = None
+    motion: Motion
+    captured_rot: np.ndarray
+    captured_pos: np.ndarray
+    rest_frames: int
+    rest_frames_dropped: bool
+    limbs: dict
+    positions: np.ndarray
+    paths: dict | None = None
+    hierarchy: SubjointHierarchy | None = None
+    sub_positions: np.ndarray | None = None
+    output: Output | None = None
+    findings: dict[str, Any] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
 
-    def __post_init__(self) -> None:
-        if self.tpose not in _TPOSE_MODES:
-            raise ConfigError(f"input.tpose must be one of {', '.join(_TPOSE_MODES)}, got {self.tpose!r}")
-        if self.fps is not None:
-            check_number("input.fps", self.fps, 0, 10000, low_open=True)
+    @property
+    def first(self) -> int:
+        """The first frame of real motion: the stages that filter in time start here."""
+        return self.rest_frames if not self.rest_frames_dropped else 0
+
+    def rubber(self) -> tuple[SubjointHierarchy, np.ndarray]:
+        """The hierarchy the springs and orientation recovery work on, and positions on it.
+
+        Without the subjoints stage: the original links, uncut (positions of
+        the original joints, in their own order).
+        """
+        if self.hierarchy is not None:
+            return self.hierarchy, self.sub_positions
+        positions = self.sub_positions if self.sub_positions is not None else self.positions
+        return _uncut_hierarchy(self.motion.skeleton), positions
+
+    def with_findings(self, **findings: Any) -> dict[str, Any]:
+        return {**self.findings, **findings}
 
 
-@dataclass(frozen=True, kw_only=True)
-class OutputConfig:
-    """What is written.
+@functools.lru_cache(maxsize=16)
+def _uncut_hierarchy(skeleton: Skeleton) -> SubjointHierarchy:
+    hierarchy = build_hierarchy(skeleton, SubjointConfig(per_link=1))
+    return replace(hierarchy, groups=())
 
-    skeleton : ``sub`` writes the rubber sub-joint hierarchy; ``original``
-        the original joints only (6 channels each), for pipelines that need
-        the original joint set.
+
+@dataclass(frozen=True)
+class Stage:
+    """One block of the pipeline.
+
+    name : what the manifest calls it
+    apply : ``(state, settings) -> state``, pure
+    settings : picks the stage's settings out of a PipelineConfig; None switches the stage off
     """
 
-    skeleton: str = "sub"
-
-    def __post_init__(self) -> None:
-        if self.skeleton not in _SKELETON_MODES:
-            raise ConfigError(f"output.skeleton must be one of {', '.join(_SKELETON_MODES)}, got {self.skeleton!r}")
+    name: str
+    apply: Callable[[State, Any], State]
+    settings: Callable[[PipelineConfig], Any]
 
 
-_BLOCKS = {
-    "input": InputConfig,
-    "extrapolate": ExtrapolateConfig,
-    "correct": CorrectConfig,
-    "auto_stretch": AutoStretchConfig,
-    "subjoints": SubjointConfig,
-    "springs": SpringConfig,
-    "output": OutputConfig,
-}
+# ---------------------------------------------------------------------------- the stages
 
 
-@dataclass(frozen=True, kw_only=True)
-class PipelineConfig:
-    """Every block's settings: the whole declaration of a run."""
-
-    input: InputConfig = field(default_factory=InputConfig)
-    extrapolate: ExtrapolateConfig = field(default_factory=ExtrapolateConfig)
-    correct: CorrectConfig = field(default_factory=CorrectConfig)
-    subjoints: SubjointConfig = field(default_factory=SubjointConfig)
-    springs: SpringConfig = field(default_factory=SpringConfig)
-    output: OutputConfig = field(default_factory=OutputConfig)
-    auto_stretch: AutoStretchConfig = field(default_factory=AutoStretchConfig)
-    stretch: tuple[StretchSpec, ...] = ()
-    limbs: tuple[tuple[str, tuple[str, ...]], ...] = ()
-    description: str = ""
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any], *, source: str = "config") -> PipelineConfig:
-        """Build and validate from nested tables; unknown keys are errors naming the key."""
-        if not isinstance(data, dict):
-            raise ConfigError(f"{source}: expected a table of blocks")
-        blocks: dict[str, Any] = {}
-        for key, value in data.items():
-            if key == "description":
-                if not isinstance(value, str):
-                    raise ConfigError(f"{source}: description must be text")
-                blocks["description"] = value
-                continue
-            if key == "stretch":
-                blocks["stretch"] = _stretch_from_list(value, source)
-                continue
-            if key == "limbs":
-                blocks["limbs"] = _limbs_from_table(value, source)
-                continue
-            if key not in _BLOCKS:
-                known = ", ".join(list(_BLOCKS) + ["limbs", "[stretch]"])
-                raise ConfigError(f"{source}: unknown block [{key}] (known: {known})")
-            if not isinstance(value, dict):
-                raise ConfigError(f"{source}: [{key}] must be a table")
-            block_type = _BLOCKS[key]
-            known = {f.name for f in fields(block_type)}
-            values = {}
-            for name, item in value.items():
-                if name not in known:
-                    raise ConfigError(f"{source}: unknown key {key}.{name} (known: {', '.join(sorted(known))})")
-                values[name] = item
-            if key == "extrapolate" and "weights" in values:
-                values["weights"] = _weights_from_table(values["weights"], source)
-            for integer in ("max_iter", "per_link"):
-                if isinstance(values.get(integer), float) and values[integer].is_integer():
-                    values[integer] = int(values[integer])
-            for listed in ("groups", "rigid"):
-                if listed in values and not isinstance(values[listed], (list, tuple)):
-                    raise ConfigError(f"{source}: {key}.{listed} must be a list")
-            try:
-                blocks[key] = block_type(**values)
-            except ConfigError as error:
-                raise ConfigError(f"{source}: {error}") from None
-            except TypeError as error:
-                raise ConfigError(f"{source}: [{key}]: {error}") from None
-        try:
-            return cls(**blocks)
-        except ConfigError as error:
-            raise ConfigError(f"{source}: {error}") from None
-
-    def to_dict(self) -> dict[str, Any]:
-        """Nested plain tables (TOML-ready: None values are left out)."""
-        out: dict[str, Any] = {}
-        if self.description:
-            out["description"] = self.description
-        for name in _BLOCKS:
-            table = asdict(getattr(self, name))
-            if name == "extrapolate":
-                table["weights"] = {pattern: float(w) for pattern, w in self.extrapolate.weights}
-            if name == "subjoints":
-                table["groups"] = [list(g) for g in self.subjoints.groups]
-                table["rigid"] = list(self.subjoints.rigid)
-            out[name] = {k: v for k, v in table.items() if v is not None}
-        if self.limbs:
-            out["limbs"] = {name: list(chain) for name, chain in self.limbs}
-        if self.stretch:
-            out["stretch"] = [spec.to_dict() for spec in self.stretch]
-        return out
-
-    @classmethod
-    def from_toml(cls, text: str, *, source: str = "config") -> PipelineConfig:
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as error:
-            raise ConfigError(f"{source}: not valid TOML: {error}") from None
-        return cls.from_dict(data, source=source)
-
-    def to_toml(self) -> str:
-        return tomli_w.dumps(self.to_dict())
+def _extrapolate(state: State, config) -> State:
+    first = state.first
+    skeleton = state.motion.skeleton
+    weights = resolve_weights(skeleton, config.weights, state.limbs)
+    positions = state.positions.copy()
+    positions[first:] = extrapolate(
+        state.positions[first:], sigma=config.sigma_frames(state.motion.frame_time), omega=config.omega,
+        weights=weights,
+    )
+    return replace(state, positions=positions)
 
 
-def _stretch_from_list(items: Any, source: str) -> tuple[StretchSpec, ...]:
-    if not isinstance(items, (list, tuple)):
-        raise ConfigError(f"{source}: stretch must be a list of tables ([[stretch]])")
-    specs = []
-    known = {f.name for f in fields(StretchSpec)}
-    for number, item in enumerate(items, start=1):
-        if not isinstance(item, dict):
-            raise ConfigError(f"{source}: stretch #{number} must be a table")
-        unknown = set(item) - known
-        if unknown:
-            raise ConfigError(f"{source}: stretch #{number}: unknown key {sorted(unknown)[0]} (known: {', '.join(sorted(known))})")
-        missing = {"limb", "start", "end", "scale"} - set(item)
-        if missing:
-            raise ConfigError(f"{source}: stretch #{number}: missing {', '.join(sorted(missing))}")
-        values = dict(item)
-        for ease in ("ease_in", "ease_out"):
-            if isinstance(values.get(ease), list):
-                values[ease] = tuple(values[ease])
-        try:
-            specs.append(StretchSpec(**values))
-        except ConfigError as error:
-            raise ConfigError(f"{source}: stretch #{number}: {error}") from None
-    return tuple(specs)
+def _correct(state: State, config) -> State:
+    first = state.first
+    skeleton = state.motion.skeleton
+    body, report = correct(
+        state.positions[first:], skeleton.parents, skeleton.link_lengths(), threshold=config.threshold,
+        delta=config.delta, max_stretch=config.max_stretch, max_iter=config.max_iter,
+    )
+    positions = state.positions.copy()
+    positions[first:] = body
+    notes = state.notes
+    if report.unconverged_frames:
+        notes += (f"correction stopped at max_iter with {report.unconverged_frames} frame(s) above threshold",)
+    return replace(state, positions=positions, findings=state.with_findings(correct=report), notes=notes)
 
 
-def _limbs_from_table(table: Any, source: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
-    if not isinstance(table, dict):
-        raise ConfigError(f"{source}: [limbs] must be a table of name = [joints]")
-    out = []
-    for name, chain in table.items():
-        if not isinstance(chain, (list, tuple)) or len(chain) < 2 or not all(isinstance(n, str) for n in chain):
-            raise ConfigError(f"{source}: limbs.{name} must list at least two joint names, base first")
-        out.append((str(name), tuple(chain)))
-    return tuple(out)
+class StretchPlan(NamedTuple):
+    """The stretch stage's settings: the declared events and the automatic finder's."""
+
+    specs: tuple[StretchSpec, ...]
+    auto: Any  # AutoStretchConfig
 
 
-def _weights_from_table(table: Any, source: str) -> tuple[tuple[str, float], ...]:
-    if isinstance(table, dict):
-        items = list(table.items())
-    elif isinstance(table, (list, tuple)):
-        items = [tuple(item) for item in table]
+def _stretch(state: State, plan: StretchPlan) -> State:
+    motion, first = state.motion, state.first
+    specs = list(plan.specs)
+    notes = list(state.notes)
+    if plan.auto.enabled:
+        # Strikes are found in the captured motion, not in its exaggeration.
+        found = find_strikes(state.captured_pos[first:], motion.skeleton, state.limbs, motion.frame_time, plan.auto)
+        found = [spec.shifted(first) for spec in found]
+        notes += [f"auto-stretch: {s.limb} frames {s.start}-{s.end} x{s.scale:g}" for s in found]
+        span = functools.partial(StretchSpec.span, frame_time=motion.frame_time, num_frames=motion.num_frames)
+        for spec in found:  # the user's own events win over found ones
+            if not overlapping(span(spec), [span(other) for other in specs if other.limb == spec.limb]):
+                specs.append(spec)
+    result = apply_stretches(state.positions, motion.skeleton, state.limbs, tuple(specs), motion.frame_time,
+                             paths=state.paths)
+    positions = result.positions
+    positions[:first] = state.positions[:first]
+    for event in result.events:
+        if event["axes_relaxed"]:
+            notes.append(
+                f"stretch {event['limb']} frames {event['frames'][0]}-{event['frames'][1]}: the path cannot "
+                f"squash to x{event['scale']:g} on axes {event['axes']}; squashed along the limb instead"
+            )
+    return replace(state, positions=positions, findings=state.with_findings(stretch=result), notes=tuple(notes))
+
+
+def _subjoints(state: State, config: SubjointConfig) -> State:
+    skeleton = state.motion.skeleton
+    hierarchy = build_hierarchy(skeleton, config)
+    return replace(state, hierarchy=hierarchy,
+                   sub_positions=position_subjoints(state.positions, hierarchy, skeleton.link_lengths()))
+
+
+def _springs(state: State, config) -> State:
+    hierarchy, positions = state.rubber()
+    parents = hierarchy.skeleton.parents
+    frame_time = state.motion.frame_time
+    links = spring_links(parents, ~hierarchy.rigid[hierarchy.link_child])
+    out = positions.copy()
+    out[state.first:] = simulate_springs(
+        positions[state.first:], parents, frame_time, stiffness=config.stiffness,
+        link_stiffness=config.link_stiffness, damping=config.damping, blend=config.blend, links=links,
+    )
+    substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
+    return replace(state, sub_positions=out, findings=state.with_findings(spring_substeps=substeps))
+
+
+def _orient(state: State, config) -> State:
+    motion = state.motion
+    hierarchy, positions = state.rubber()
+    sub_rot, sub_pos = recover_orientations(positions, hierarchy, motion, state.captured_rot, state.captured_pos)
+    if config.skeleton == "original":
+        keep = hierarchy.original
+        out_pos, out_rot = sub_pos[:, keep], sub_rot[:, keep]
+        out = motion_from_world(out_pos, out_rot, motion.skeleton.with_full_channels(), motion.frame_time,
+                                motion.euler_hint)
+        original_index = np.arange(motion.skeleton.num_joints)
     else:
-        raise ConfigError(f"{source}: extrapolate.weights must be a table of name = weight")
-    out = []
-    for pattern, weight in items:
-        if isinstance(weight, bool) or not isinstance(weight, (int, float)):
-            raise ConfigError(f"{source}: extrapolate.weights[{pattern!r}] must be a number, got {weight!r}")
-        out.append((str(pattern), float(weight)))
-    return tuple(out)
+        out_pos, out_rot = sub_pos, sub_rot
+        out = motion_from_world(out_pos, out_rot, hierarchy.skeleton, motion.frame_time)
+        original_index = hierarchy.original
+    return replace(state, output=Output(out, out_pos, out_rot, original_index))
 
 
-# ---------------------------------------------------------------------------- presets
+def _block(name: str) -> Callable[[PipelineConfig], Any]:
+    """Settings picker for a block with an ``enabled`` switch."""
+    def pick(config: PipelineConfig):
+        block = getattr(config, name)
+        return block if block.enabled else None
+
+    return pick
 
 
-def preset_names() -> list[str]:
-    """Names of the shipped presets."""
-    folder = resources.files("mocap_exaggerate") / "presets"
-    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
-
-
-def _preset_table(name: str) -> dict[str, Any]:
-    if name not in preset_names():
-        raise ConfigError(f"unknown preset {name!r} (known: {', '.join(preset_names())})")
-    text = (resources.files("mocap_exaggerate") / "presets" / f"{name}.toml").read_text(encoding="utf-8")
-    return tomllib.loads(text)
-
-
-def load_preset(name: str) -> PipelineConfig:
-    """A shipped preset as a PipelineConfig."""
-    return PipelineConfig.from_dict(_preset_table(name), source=f"preset {name}")
-
-
-def preset_description(name: str) -> str:
-    return str(_preset_table(name).get("description", ""))
-
-
-def _merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
-    out = copy.deepcopy(base)
-    for key, value in top.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = _merge(out[key], value)
-        else:
-            out[key] = copy.deepcopy(value)
-    return out
-
-
-def resolve_config(
-    preset: str | None = DEFAULT_PRESET,
-    config_text: str | None = None,
-    overrides: dict[str, Any] | None = None,
-    *,
-    config_source: str = "config",
-) -> PipelineConfig:
-    """Shipped preset < config file < explicit overrides (nested tables), validated."""
-    table: dict[str, Any] = _preset_table(preset) if preset else {}
-    if config_text is not None:
-        try:
-            file_table = tomllib.loads(config_text)
-        except tomllib.TOMLDecodeError as error:
-            raise ConfigError(f"{config_source}: not valid TOML: {error}") from None
-        PipelineConfig.from_dict(file_table, source=config_source)  # name the file in its own errors
-        table = _merge(table, file_table)
-    if overrides:
-        table = _merge(table, overrides)
-    return PipelineConfig.from_dict(table, source=config_source if config_text is not None else "options")
+#: The blocks in the order they run.
+STAGES: tuple[Stage, ...] = (
+    Stage("extrapolate", _extrapolate, _block("extrapolate")),
+    Stage("correct", _correct, _block("correct")),
+    Stage("stretch", _stretch,
+          lambda c: StretchPlan(c.stretch, c.auto_stretch) if c.stretch or c.auto_stretch.enabled else None),
+    Stage("subjoints", _subjoints, _block("subjoints")),
+    Stage("springs", _springs, lambda c: c.springs if c.springs.enabled and c.springs.blend > 0 else None),
+    Stage("orient", _orient, lambda c: c.output),
+)
 
 
 # ---------------------------------------------------------------------------- running
+
+
+@dataclass
+class PipelineResult:
+    """A run's output and what happened on the way.
+
+    motion : the output Motion (6 channels on every joint)
+    world_positions : (F, J_out, 3) float64 positions the output's FK reproduces
+    world_rotations : (F, J_out, 4) float64 orientations it reproduces
+    original_index : (J,) int, where each original joint is in the output skeleton
+    hierarchy : the sub-joint hierarchy (None when sub-joints were off)
+    rest_frames : leading synthetic rest frames kept out of the filters
+    stages : names of the stages that ran, in order
+    timings : seconds per step, in run order
+    correct_report : CorrectReport or None when correction was off
+    """
+
+    motion: Motion
+    world_positions: np.ndarray
+    world_rotations: np.ndarray
+    original_index: np.ndarray
+    hierarchy: SubjointHierarchy | None
+    rest_frames: int
+    rest_frames_dropped: bool
+    timings: dict[str, float]
+    correct_report: CorrectReport | None = None
+    max_link_stretch: float = 1.0
+    substeps: int = 0
+    notes: list[str] = field(default_factory=list)
+    stretch: StretchResult | None = None
+    stages: list[str] = field(default_factory=list)
+
+
+def prepare(motion: Motion, config: InputConfig | None = None, *, limbs: dict | None = None,
+            paths: dict | None = None) -> State:
+    """The state the stages start from: forward kinematics, rest frames found (and dropped if asked)."""
+    config = config or InputConfig()
+    world_rot, world = motion.forward_kinematics()
+    rest = detect_rest_frames(motion, world) if config.tpose in ("auto", "drop") else 0
+    dropped = config.tpose == "drop" and rest > 0
+    notes: tuple[str, ...] = ()
+    if dropped:
+        motion = motion.slice(slice(rest, None))
+        world_rot, world = world_rot[rest:], world[rest:]
+        notes = (f"dropped {rest} leading rest-pose frame(s)",)
+    elif rest:
+        notes = (f"kept {rest} leading rest-pose frame(s) out of the filters, unchanged",)
+    return State(motion=motion, captured_rot=world_rot, captured_pos=world, rest_frames=rest,
+                 rest_frames_dropped=dropped, limbs=find_limbs(motion.skeleton) if limbs is None else limbs,
+                 positions=world.copy(), paths=paths, notes=notes)
+
+
+def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | None = None,
+        stages: tuple[Stage, ...] = STAGES) -> PipelineResult:
+    """Run the stages that are switched on over a whole clip.
+
+    ``paths`` maps limb names to hand-edited end-effector paths ``(frames,
+    positions)`` (a trails file): the limb follows them (see `apply_stretches`);
+    an edited path that no stretch covers becomes an event of its own.
+    ``stages`` is the declared list (default `STAGES`); it must end with a
+    stage that sets ``state.output`` (orient).
+    """
+    config = config or PipelineConfig()
+    if paths:
+        config = replace(config, stretch=config.stretch + _specs_for_paths(paths, config.stretch))
+    timings: dict[str, float] = {}
+    start = time.perf_counter()
+    state = prepare(motion, config.input, limbs=pipeline_limbs(motion.skeleton, config), paths=paths)
+    timings["forward_kinematics"] = time.perf_counter() - start
+    ran = []
+    for stage in stages:
+        settings = stage.settings(config)
+        if settings is None:
+            continue
+        start = time.perf_counter()
+        state = stage.apply(state, settings)
+        timings[stage.name] = time.perf_counter() - start
+        ran.append(stage.name)
+    if state.output is None:
+        raise ValueError("the pipeline's stages produced no output motion (is orient in the list?)")
+    skeleton = state.motion.skeleton
+    return PipelineResult(
+        motion=state.output.motion,
+        world_positions=state.output.world_positions,
+        world_rotations=state.output.world_rotations,
+        original_index=state.output.original_index,
+        hierarchy=state.hierarchy,
+        rest_frames=state.rest_frames,
+        rest_frames_dropped=state.rest_frames_dropped,
+        timings=timings,
+        correct_report=state.findings.get("correct"),
+        max_link_stretch=max_link_stretch(state.positions, skeleton.parents, skeleton.link_lengths()),
+        substeps=state.findings.get("spring_substeps", 0),
+        notes=list(state.notes),
+        stretch=state.findings.get("stretch"),
+        stages=ran,
+    )
+
+
+def _specs_for_paths(paths: dict, specs: tuple[StretchSpec, ...]) -> tuple[StretchSpec, ...]:
+    """Events (scale 1, no release) for edited paths on limbs no declared stretch covers."""
+    extra = []
+    for limb, (edit_frames, _) in paths.items():
+        if not any(s.limb == limb for s in specs) and len(edit_frames) >= 2:
+            extra.append(StretchSpec(limb=limb, start=int(min(edit_frames)), end=int(max(edit_frames)), scale=1.0,
+                                     release=0))
+    return tuple(extra)
+
+
+def max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.ndarray) -> float:
+    """Largest ratio of current to rest length over links longer than 1e-9 of the longest."""
+    long_links = lengths > 1e-9 * max(lengths.max(), 1e-12)
+    long_links[0] = False
+    if not long_links.any():
+        return 1.0
+    current = np.linalg.norm(positions[:, long_links] - positions[:, parents[long_links]], axis=-1)
+    return float((current / lengths[long_links]).max())
 
 
 def pipeline_limbs(skeleton: Skeleton, config: PipelineConfig) -> dict:
@@ -345,197 +404,6 @@ def resolve_weights(skeleton: Skeleton, weights: tuple[tuple[str, float], ...], 
     return out
 
 
-@dataclass
-class PipelineResult:
-    """A run's output and what happened on the way.
-
-    motion : the output Motion (6 channels on every joint)
-    world_positions : (F, J_out, 3) float64 positions the output's FK reproduces
-    world_rotations : (F, J_out, 4) float64 orientations it reproduces
-    original_index : (J,) int, where each original joint is in the output skeleton
-    hierarchy : the sub-joint hierarchy (None when sub-joints were off)
-    rest_frames : leading synthetic rest frames kept out of the filters
-    timings : seconds per block, in run order
-    correct_report : CorrectReport or None when correction was off
-    """
-
-    motion: Motion
-    world_positions: np.ndarray
-    world_rotations: np.ndarray
-    original_index: np.ndarray
-    hierarchy: SubjointHierarchy | None
-    rest_frames: int
-    rest_frames_dropped: bool
-    timings: dict[str, float]
-    correct_report: CorrectReport | None = None
-    max_link_stretch: float = 1.0
-    substeps: int = 0
-    notes: list[str] = field(default_factory=list)
-    stretch: StretchResult | None = None
-
-
-def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | None = None) -> PipelineResult:
-    """Run the blocks that are switched on over a whole clip.
-
-    ``paths`` maps limb names to hand-edited end-effector paths ``(frames,
-    positions)`` (a trails file): the limb follows them (see `apply_stretches`).
-    """
-    config = config or PipelineConfig()
-    timings: dict[str, float] = {}
-    notes: list[str] = []
-
-    start = time.perf_counter()
-    world_rot, world = motion.forward_kinematics()
-    rest = detect_rest_frames(motion, world) if config.input.tpose in ("auto", "drop") else 0
-    dropped = config.input.tpose == "drop" and rest > 0
-    if dropped:
-        motion = motion.slice(slice(rest, None))
-        world_rot, world = world_rot[rest:], world[rest:]
-        notes.append(f"dropped {rest} leading rest-pose frame(s)")
-    elif rest:
-        notes.append(f"kept {rest} leading rest-pose frame(s) out of the filters, unchanged")
-    timings["forward_kinematics"] = time.perf_counter() - start
-
-    first = 0 if dropped else rest
-    body = world[first:]
-    skeleton = motion.skeleton
-
-    limbs = pipeline_limbs(skeleton, config)
-    if config.extrapolate.enabled:
-        start = time.perf_counter()
-        weights = resolve_weights(skeleton, config.extrapolate.weights, limbs)
-        body = extrapolate(
-            body,
-            sigma=config.extrapolate.sigma_frames(motion.frame_time),
-            omega=config.extrapolate.omega,
-            weights=weights,
-        )
-        timings["extrapolate"] = time.perf_counter() - start
-
-    report = None
-    if config.correct.enabled:
-        start = time.perf_counter()
-        body, report = correct(
-            body,
-            skeleton.parents,
-            skeleton.link_lengths(),
-            threshold=config.correct.threshold,
-            delta=config.correct.delta,
-            max_stretch=config.correct.max_stretch,
-            max_iter=config.correct.max_iter,
-        )
-        if report.unconverged_frames:
-            notes.append(f"correction stopped at max_iter with {report.unconverged_frames} frame(s) above threshold")
-        timings["correct"] = time.perf_counter() - start
-
-    stretch_result = None
-    specs = list(config.stretch)
-    if config.auto_stretch.enabled:
-        # Strikes are found in the captured motion, not in its exaggeration.
-        found = find_strikes(world[first:], skeleton, limbs, motion.frame_time, config.auto_stretch)
-        found = [s.shifted(first) for s in found]
-        for spec in found:
-            notes.append(f"auto-stretch: {spec.limb} frames {spec.start}-{spec.end} x{spec.scale:g}")
-        for spec in found:  # the user's own events win over found ones
-            if not _overlaps(spec, specs, motion.frame_time, motion.num_frames):
-                specs.append(spec)
-    if specs or paths:
-        start = time.perf_counter()
-        specs += _specs_for_paths(paths, specs, motion.frame_time, motion.num_frames)
-        whole = world.copy()
-        whole[first:] = body
-        stretch_result = apply_stretches(whole, skeleton, limbs, tuple(specs), motion.frame_time, paths=paths)
-        body = stretch_result.positions[first:]
-        for event in stretch_result.events:
-            if event["axes_relaxed"]:
-                notes.append(
-                    f"stretch {event['limb']} frames {event['frames'][0]}-{event['frames'][1]}: the path cannot "
-                    f"squash to x{event['scale']:g} on axes {event['axes']}; squashed along the limb instead"
-                )
-        timings["stretch"] = time.perf_counter() - start
-
-    positions = world.copy()
-    positions[first:] = body
-    lengths = skeleton.link_lengths()
-    stretch = _max_link_stretch(positions, skeleton.parents, lengths)
-
-    start = time.perf_counter()
-    sub_config = config.subjoints if config.subjoints.enabled else SubjointConfig(per_link=1, groups=(), rigid=())
-    hierarchy = build_hierarchy(skeleton, sub_config)
-    if not config.subjoints.enabled:
-        hierarchy = SubjointHierarchy(hierarchy.skeleton, hierarchy.original, hierarchy.link_child,
-                                      hierarchy.link_parent, hierarchy.fraction, hierarchy.rigid, ())
-    sub_pos = position_subjoints(positions, hierarchy, lengths)
-    timings["subjoints"] = time.perf_counter() - start
-
-    substeps = 0
-    if config.springs.enabled and config.springs.blend > 0:
-        start = time.perf_counter()
-        active = ~hierarchy.rigid[hierarchy.link_child]
-        substeps = spring_substeps(hierarchy.skeleton.parents, motion.frame_time, config.springs, active)
-        sub_pos[first:] = simulate_springs(
-            sub_pos[first:],
-            hierarchy.skeleton.parents,
-            motion.frame_time,
-            stiffness=config.springs.stiffness,
-            link_stiffness=config.springs.link_stiffness,
-            damping=config.springs.damping,
-            blend=config.springs.blend,
-            active=active,
-        )
-        timings["springs"] = time.perf_counter() - start
-
-    start = time.perf_counter()
-    sub_rot, sub_pos = recover_orientations(sub_pos, hierarchy, motion, world_rot, world)
-    if config.output.skeleton == "original":
-        keep = hierarchy.original
-        out_pos, out_rot = sub_pos[:, keep], sub_rot[:, keep]
-        out = motion_from_world(out_pos, out_rot, skeleton.with_full_channels(), motion.frame_time,
-                                motion.euler_hint)
-        original_index = np.arange(skeleton.num_joints)
-    else:
-        out_pos, out_rot = sub_pos, sub_rot
-        out = motion_from_world(out_pos, out_rot, hierarchy.skeleton, motion.frame_time)
-        original_index = hierarchy.original
-    timings["orient"] = time.perf_counter() - start
-
-    return PipelineResult(
-        out, out_pos, out_rot, original_index, hierarchy if config.subjoints.enabled else None,
-        rest, dropped, timings, report, stretch, substeps, notes, stretch_result,
-    )
-
-
-def _overlaps(spec: StretchSpec, others: list[StretchSpec], frame_time: float, frames: int) -> bool:
-    first, last = spec.span(frame_time, frames)
-    for other in others:
-        if other.limb == spec.limb:
-            a, b = other.span(frame_time, frames)
-            if first <= b and a <= last:
-                return True
-    return False
-
-
-def _specs_for_paths(paths: dict | None, specs: list[StretchSpec], frame_time: float, frames: int) -> list[StretchSpec]:
-    """Events (scale 1, no release) for edited paths that no stretch already covers."""
-    extra = []
-    for limb, (edit_frames, _) in (paths or {}).items():
-        covered = any(s.limb == limb for s in specs)
-        if not covered and len(edit_frames) >= 2:
-            extra.append(StretchSpec(limb=limb, start=int(min(edit_frames)), end=int(max(edit_frames)), scale=1.0,
-                                     release=0))
-    return extra
-
-
-def _max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.ndarray) -> float:
-    """Largest ratio of current to rest length over links longer than 1e-9 of the longest."""
-    long_links = lengths > 1e-9 * max(lengths.max(), 1e-12)
-    long_links[0] = False
-    if not long_links.any():
-        return 1.0
-    current = np.linalg.norm(positions[:, long_links] - positions[:, parents[long_links]], axis=-1)
-    return float((current / lengths[long_links]).max())
-
-
 def exaggerate(motion: Motion, config: PipelineConfig | None = None, **preset: Any) -> Motion:
     """Exaggerate a clip with ``config`` (default: the `DEFAULT_PRESET` preset); the output Motion.
 
@@ -549,135 +417,3 @@ def exaggerate(motion: Motion, config: PipelineConfig | None = None, **preset: A
     if preset:
         raise TypeError(f"unexpected arguments: {', '.join(preset)}")
     return run(motion, config).motion
-
-
-def file_digest(data: bytes) -> str:
-    return "sha256:" + hashlib.sha256(data).hexdigest()
-
-
-def manifest(
-    *,
-    input_name: str,
-    input_bytes: bytes,
-    config: PipelineConfig,
-    preset: str | None,
-    result: PipelineResult,
-    outputs: dict[str, str],
-    read_seconds: float,
-    write_seconds: float,
-    reader_warnings: list[str],
-    frames_in: int,
-    fps: float,
-) -> dict[str, Any]:
-    """The JSON manifest that records how an output was made.
-
-    Timings are the only part that varies between identical runs; they are
-    kept apart under ``timings`` so a comparison can ignore them.
-    """
-    info: dict[str, Any] = {
-        "tool": "mocap_exaggerate",
-        "version": __version__,
-        "input": {"file": input_name, "hash": file_digest(input_bytes), "frames": frames_in, "fps": fps},
-        "preset": preset,
-        "config": config.to_dict(),
-        "stages": [s for s in STAGES if s in result.timings and (s != "subjoints" or config.subjoints.enabled)],
-        "rest_frames": {"count": result.rest_frames, "dropped": result.rest_frames_dropped},
-        "outputs": outputs,
-        "result": {
-            "frames": result.motion.num_frames,
-            "joints": result.motion.skeleton.num_joints,
-            "max_link_stretch": round(result.max_link_stretch, 6),
-            "skeleton": config.output.skeleton,
-        },
-        "warnings": list(reader_warnings) + list(result.notes),
-        "timings": {"read": read_seconds, **result.timings, "write": write_seconds},
-    }
-    if result.hierarchy is not None:
-        names = result.hierarchy.skeleton.names
-        info["result"]["subjoints"] = result.hierarchy.skeleton.num_joints
-        info["result"]["groups"] = [[names[result.hierarchy.original[j]] for j in chain] for chain in result.hierarchy.groups]
-    if result.substeps:
-        info["result"]["spring_substeps"] = result.substeps
-    if result.stretch is not None:
-        info["result"]["stretch"] = result.stretch.events
-    if result.correct_report is not None:
-        info["result"]["correct"] = {
-            k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(result.correct_report).items()
-        }
-    return info
-
-
-def output_thickness(result: PipelineResult) -> np.ndarray | None:
-    """World scale ``(F, J_out)`` per output joint for volume preservation, or None without a stretch pass.
-
-    A joint's bone runs to its child: a sub-joint takes the stretch of the link
-    it lies on, an original joint the largest stretch among its outgoing links;
-    thickness is ``1 / sqrt(stretch)``.
-    """
-    if result.stretch is None:
-        return None
-    factors = result.stretch.stretch_factors  # (F, J): the link ending at each original joint
-    skeleton = result.motion.skeleton
-    hierarchy = result.hierarchy
-    parents = _original_parents(result)
-    outgoing = np.ones_like(factors)
-    for child in range(1, factors.shape[1]):
-        outgoing[:, parents[child]] = np.maximum(outgoing[:, parents[child]], factors[:, child])
-    if hierarchy is not None and skeleton is hierarchy.skeleton:
-        between = hierarchy.fraction < 1.0
-        stretch = np.where(between[None, :], factors[:, hierarchy.link_child], outgoing[:, hierarchy.link_child])
-    else:
-        stretch = outgoing
-    return 1.0 / np.sqrt(np.maximum(stretch, 1e-6))
-
-
-def _original_parents(result: PipelineResult) -> np.ndarray:
-    hierarchy = result.hierarchy
-    if hierarchy is not None:
-        parents = np.full(len(hierarchy.original), -1)
-        originals = hierarchy.is_original
-        parents[hierarchy.link_child[originals]] = hierarchy.link_parent[originals]
-        return parents
-    return np.asarray(result.motion.skeleton.parents)
-
-
-def make_glb(motion: Motion, result: PipelineResult, skin=None, units: str = "auto",
-             influences: int = 4) -> tuple[bytes, bytes, str]:
-    """The skinned GLB of a run, its skin as ``.npz`` bytes, and how the units were decided.
-
-    skin : a `Skin` bound to ``motion``'s joints in its rest pose, or None for
-        the default body grown from the skeleton; either is re-weighted onto
-        the sub-joints when the output skeleton is the rubber one.
-    """
-    from .io.gltf import format_glb, unit_scale
-    from .io.skin import npz_bytes
-    from .stages.body import default_skin
-    from .stages.reweight import reweight
-
-    hierarchy = result.hierarchy
-    skeleton = motion.skeleton
-    if skin is None:
-        skin = default_skin(skeleton, hierarchy.rigid if hierarchy is not None else None)
-    elif skin.bind:
-        # A skin with its own bind pose must have been bound in the clip's rest pose.
-        rest = skeleton.rest_positions()
-        off = [np.linalg.norm(np.asarray(p) - rest[skeleton.index(n)]) for n, p in skin.bind.items()
-               if n in skeleton.names]
-        if not off or max(off) > 1e-3 * skeleton.height():
-            raise ConfigError("the skin's bind pose is not the clip's rest pose (joints up to "
-                              f"{max(off, default=float('nan')):.3g} units away); bind it in the BVH's rest pose")
-    if influences not in (4, 8):
-        raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
-    if hierarchy is not None and result.motion.skeleton is hierarchy.skeleton:
-        skin = reweight(skin, skeleton, hierarchy, max_influences=influences)
-    elif skin.joints.shape[1] > influences:
-        from .io.skin import top_influences
-
-        rows = np.repeat(np.arange(skin.num_vertices), skin.joints.shape[1])
-        joints, weights = top_influences(rows, skin.joints.ravel(), skin.weights.ravel(), skin.num_vertices, influences)
-        skin = type(skin)(skin.vertices, skin.faces, skin.joint_names, joints, weights, skin.bind)
-    scale, how = unit_scale(units, skeleton.height())
-    glb = format_glb(result.motion, skin, meters_per_unit=scale, thickness=output_thickness(result))
-    weights = npz_bytes(joint_names=np.array(skin.joint_names), joints=skin.joints, weights=skin.weights,
-                        vertices=skin.vertices, faces=skin.faces)
-    return glb, weights, how

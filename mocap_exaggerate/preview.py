@@ -12,15 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .io.files import atomic_write
-from .io.skin import Skin
 from .motion import Motion
+from .outputs import base_skin, output_skin
 from .pipeline import PipelineResult
 from .rotations import quat_rotate
-from .stages.body import default_skin
-from .stages.reweight import reweight
+from .skinning import Skin
 
-__all__ = ["pose_skin", "render_preview", "save_preview"]
+__all__ = ["pose_skin", "render_preview", "write_preview"]
 
 
 def pose_skin(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray,
@@ -61,10 +59,9 @@ def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, w
     import matplotlib.pyplot as plt
 
     skeleton = motion.skeleton
-    hierarchy = result.hierarchy
-    body = default_skin(skeleton, hierarchy.rigid if hierarchy is not None else None)
+    body = base_skin(motion, result)
+    rubber = output_skin(motion, result, body)
     out_skeleton = result.motion.skeleton
-    rubber = reweight(body, skeleton, hierarchy) if hierarchy is not None and out_skeleton is hierarchy.skeleton else body
     captured_rot, captured_pos = motion.forward_kinematics()
     first = result.rest_frames if not result.rest_frames_dropped else 0
     picks = np.unique(np.linspace(first, motion.num_frames - 1, frames).astype(int))
@@ -104,6 +101,27 @@ def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, w
     return buffer.getvalue()
 
 
-def save_preview(motion: Motion, result: PipelineResult, path: str | os.PathLike, *, frames: int = 5,
-                 overwrite: bool = False) -> None:
-    atomic_write(Path(path), render_preview(motion, result, frames=frames), overwrite=overwrite)
+
+def write_preview(source, output: str | os.PathLike, config=None, *, frames: int = 5, overwrite: bool = False,
+                  label: str | None = None) -> Path:
+    """Run the pipeline on a clip (path, bytes or stream) and write its preview PNG to ``output``.
+
+    The target is checked first (never an input; taken only with ``overwrite``).
+    """
+    from .config import load_preset
+    from .io.bvh import read_bvh
+    from .io.files import atomic_write
+    from .job import check_targets
+    from .pipeline import run
+
+    output = Path(output)
+    if output.suffix.lower() != ".png":
+        from .errors import ConfigError
+
+        raise ConfigError(f"{output}: previews are written as PNG; name the file .png")
+    inputs = [Path(source)] if isinstance(source, (str, os.PathLike)) and str(source) != "-" else []
+    check_targets({"preview": output}, inputs, overwrite)
+    config = config or load_preset("cartoon")
+    motion, _ = read_bvh(source, name=label, fps=config.input.fps)
+    atomic_write(output, render_preview(motion, run(motion, config), frames=frames), overwrite=True)
+    return output

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import warnings
 
-import numba
 import numpy as np
 
 __all__ = [
@@ -27,88 +26,70 @@ __all__ = [
     "quat_inv",
     "quat_rotate",
     "quat_slerp",
+    "quat_between",
     "quat_normalize",
     "quat_angle",
+    "quat_identity",
     "quat_from_axis_angle",
     "quat_from_euler",
     "quat_to_euler",
     "quat_unroll",
+    "cross",
 ]
 
 
-@numba.njit(cache=True, inline="always")
-def _mul_into(ax, ay, az, aw, b, out):  # pragma: no cover - compiled
-    bx, by, bz, bw = b[0], b[1], b[2], b[3]
-    out[0] = aw * bx + ax * bw + ay * bz - az * by
-    out[1] = aw * by - ax * bz + ay * bw + az * bx
-    out[2] = aw * bz + ax * by - ay * bx + az * bw
-    out[3] = aw * bw - ax * bx - ay * by - az * bz
+def _parts(q: np.ndarray):
+    q = np.asarray(q, dtype=np.float64)
+    return q[..., 0], q[..., 1], q[..., 2], q[..., 3]
 
 
-@numba.njit(cache=True, inline="always")
-def _rotate_into(ux, uy, uz, w, v, out):  # pragma: no cover - compiled
-    tx = 2.0 * (uy * v[2] - uz * v[1])
-    ty = 2.0 * (uz * v[0] - ux * v[2])
-    tz = 2.0 * (ux * v[1] - uy * v[0])
-    out[0] = v[0] + w * tx + (uy * tz - uz * ty)
-    out[1] = v[1] + w * ty + (uz * tx - ux * tz)
-    out[2] = v[2] + w * tz + (ux * ty - uy * tx)
+def quat_identity(shape: tuple[int, ...] = ()) -> np.ndarray:
+    """Identity quaternions ``shape + (4,)``."""
+    q = np.zeros(tuple(shape) + (4,))
+    q[..., 3] = 1.0
+    return q
 
 
-@numba.njit(cache=True)
-def _rows_kernel(kind, a, b, out):  # pragma: no cover - compiled
-    """Row by row: 0 a*b, 1 rotate b by a."""
-    for i in range(a.shape[0]):
-        x, y, z, w = a[i, 0], a[i, 1], a[i, 2], a[i, 3]
-        if kind == 0:
-            _mul_into(x, y, z, w, b[i], out[i])
-        else:
-            _rotate_into(x, y, z, w, b[i], out[i])
-
-
-@numba.njit(cache=True, inline="always")
-def slerp_into(a, b, t, out):  # pragma: no cover - compiled
-    """Slerp of one pair of unit quaternions into ``out`` (for compiled callers)."""
-    dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
-    sign = 1.0
-    if dot < 0.0:
-        dot = -dot
-        sign = -1.0
-    if dot > 1.0:
-        dot = 1.0
-    angle = np.arccos(dot)
-    sin = np.sin(angle)
-    if sin < 1e-9:
-        wa = 1.0 - t
-        wb = t * sign
-    else:
-        wa = np.sin((1.0 - t) * angle) / sin
-        wb = sign * np.sin(t * angle) / sin
-    norm = 0.0
-    for i in range(4):
-        out[i] = wa * a[i] + wb * b[i]
-        norm += out[i] * out[i]
-    norm = np.sqrt(norm) if norm > 0.0 else 1.0
-    for i in range(4):
-        out[i] /= norm
-
-
-@numba.njit(cache=True)
-def _slerp_kernel(a, b, t, out):  # pragma: no cover - compiled
-    for row in range(a.shape[0]):
-        slerp_into(a[row], b[row], t[row], out[row])
-
-
-def _rows(kind: int, a: np.ndarray, b: np.ndarray, width: int) -> np.ndarray:
-    """Broadcast ``a (..., 4)`` against ``b (..., width)`` and run a row kernel over them."""
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis, broadcasting (without ``np.cross``'s overhead)."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    lead = np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
-    rows_a = np.ascontiguousarray(np.broadcast_to(a, lead + (4,))).reshape(-1, 4)
-    rows_b = np.ascontiguousarray(np.broadcast_to(b, lead + (width,))).reshape(-1, width)
-    out = np.empty_like(rows_b)
-    _rows_kernel(kind, rows_a, rows_b, out)
-    return out.reshape(lead + (width,))
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = ay * bz - az * by
+    out[..., 1] = az * bx - ax * bz
+    out[..., 2] = ax * by - ay * bx
+    return out
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` (apply ``b`` first, then ``a``), broadcasting."""
+    ax, ay, az, aw = _parts(a)
+    bx, by, bz, bw = _parts(b)
+    out = np.empty(np.broadcast_shapes(np.shape(a), np.shape(b)))
+    out[..., 0] = aw * bx + ax * bw + ay * bz - az * by
+    out[..., 1] = aw * by - ax * bz + ay * bw + az * bx
+    out[..., 2] = aw * bz + ax * by - ay * bx + az * bw
+    out[..., 3] = aw * bw - ax * bx - ay * by - az * bz
+    return out
+
+
+def quat_inv(q: np.ndarray) -> np.ndarray:
+    """Inverse of unit quaternions (the conjugate)."""
+    return np.asarray(q, dtype=np.float64) * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)``, broadcasting.
+
+    ``v + w t + u x t`` with ``t = 2 u x v`` (u, w: the vector and scalar parts).
+    """
+    q = np.asarray(q, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    u = q[..., :3]
+    t = 2.0 * cross(u, v)
+    return v + q[..., 3:] * t + cross(u, t)
 
 
 def quat_slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarray:
@@ -118,46 +99,45 @@ def quat_slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarra
     """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    t = np.asarray(t, dtype=np.float64)
-    lead = np.broadcast_shapes(a.shape[:-1], b.shape[:-1], t.shape)
-    out = np.empty((int(np.prod(lead)), 4))
-    _slerp_kernel(
-        np.ascontiguousarray(np.broadcast_to(a, lead + (4,))).reshape(-1, 4),
-        np.ascontiguousarray(np.broadcast_to(b, lead + (4,))).reshape(-1, 4),
-        np.ascontiguousarray(np.broadcast_to(t, lead)).reshape(-1),
-        out,
-    )
-    return out.reshape(lead + (4,))
+    t = np.asarray(t, dtype=np.float64)[..., None]
+    dot = np.sum(a * b, axis=-1, keepdims=True)
+    sign = np.where(dot < 0.0, -1.0, 1.0)
+    dot = np.minimum(np.abs(dot), 1.0)
+    angle = np.arccos(dot)
+    sin = np.sin(angle)
+    small = sin < 1e-9
+    safe = np.where(small, 1.0, sin)
+    wa = np.where(small, 1.0 - t, np.sin((1.0 - t) * angle) / safe)
+    wb = sign * np.where(small, t, np.sin(t * angle) / safe)
+    out = wa * a + wb * b
+    norm = np.linalg.norm(out, axis=-1, keepdims=True)
+    return out / np.where(norm > 0.0, norm, 1.0)
 
 
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product ``a * b`` (apply ``b`` first, then ``a``), broadcasting.
+def quat_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Smallest rotation carrying directions ``u`` onto ``v``, ``(..., 3) -> (..., 4)``.
 
-    Compiled (Numba): ten times faster than NumPy component arithmetic on
-    ``(F, J, 4)`` arrays, whose strided access dominates.
+    Identity where either vector is (nearly) zero; a half turn about some
+    perpendicular axis where they are opposite.
     """
-    return _rows(0, a, b, 4)
-
-
-def quat_inv(q: np.ndarray) -> np.ndarray:
-    """Inverse of unit quaternions (the conjugate)."""
-    return q * np.array([-1.0, -1.0, -1.0, 1.0])
-
-
-def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)``, broadcasting."""
-    return _rows(1, q, v, 3)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis, without ``np.cross``'s broadcasting overhead."""
-    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
-    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = ay * bz - az * by
-    out[..., 1] = az * bx - ax * bz
-    out[..., 2] = ax * by - ay * bx
-    return out
+    u = np.asarray(u, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    nu = np.linalg.norm(u, axis=-1, keepdims=True)
+    nv = np.linalg.norm(v, axis=-1, keepdims=True)
+    q = np.concatenate([cross(u, v), nu * nv + np.sum(u * v, axis=-1, keepdims=True)], axis=-1)
+    norm = np.linalg.norm(q, axis=-1, keepdims=True)
+    tiny = 1e-12 * np.maximum(nu * nv, 1e-300)
+    opposite = (norm <= tiny) & (nu * nv > 0)
+    if np.any(opposite):
+        # Any axis perpendicular to u: cross with the coordinate axis least aligned with it.
+        helper = np.eye(3)[np.argmin(np.abs(u), axis=-1)]
+        perpendicular = cross(u, helper)
+        perpendicular /= np.maximum(np.linalg.norm(perpendicular, axis=-1, keepdims=True), 1e-300)
+        flipped = np.concatenate([perpendicular, np.zeros(u.shape[:-1] + (1,))], axis=-1)
+        q = np.where(opposite, flipped, q)
+        norm = np.where(opposite, 1.0, norm)
+    degenerate = (nu * nv <= 1e-300) | (norm <= 0)
+    return np.where(degenerate, quat_identity(q.shape[:-1]), q / np.where(norm > 0, norm, 1.0))
 
 
 def quat_normalize(q: np.ndarray) -> np.ndarray:

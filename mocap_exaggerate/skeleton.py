@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .kinematics import rest_positions
+
 __all__ = ["Skeleton", "POSITION_CHANNELS", "ROTATION_CHANNELS"]
 
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
@@ -126,11 +128,7 @@ class Skeleton:
     # ------------------------------------------------------------------ geometry
     def rest_positions(self) -> np.ndarray:
         """World positions of the joints in the rest pose (offsets only), ``(J, 3)``."""
-        pos = np.zeros((self.num_joints, 3))
-        pos[0] = self.offsets[0]
-        for j in range(1, self.num_joints):
-            pos[j] = pos[self.parents[j]] + self.offsets[j]
-        return pos
+        return rest_positions(self.parents, self.offsets)
 
     def link_lengths(self) -> np.ndarray:
         """Rest length of the link from each joint's parent to it, ``(J,)``; 0 for the root."""

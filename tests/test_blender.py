@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
-from mocap_exaggerate.pipeline import load_preset, run
+from mocap_exaggerate.config import load_preset
+from mocap_exaggerate.pipeline import run
 
 from .helpers import ROOT, SAMPLE_DIR
 
@@ -70,7 +71,7 @@ def test_blender_imports_the_glb_and_deforms_the_mesh_as_we_do(clip, tmp_path):
     from scipy.spatial import cKDTree
 
     from mocap_exaggerate.io.gltf import unit_scale
-    from mocap_exaggerate.pipeline import make_glb
+    from mocap_exaggerate.outputs import make_glb
 
     from .test_gltf import skinned_vertices
 

@@ -200,7 +200,7 @@ def test_save_is_atomic_and_refuses_to_overwrite(tmp_path, sample_clip):
     target = tmp_path / "out.bvh"
     save_bvh(motion, target, overwrite=False)
     before = target.read_bytes()
-    with pytest.raises(OutputExistsError, match="--overwrite"):
+    with pytest.raises(OutputExistsError, match="out.bvh exists"):
         save_bvh(motion, target, overwrite=False)
     assert target.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.bvh"]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from cli.main import cli
+from mocap_exaggerate_cli.main import cli
 from mocap_exaggerate.io.bvh import read_bvh
 
 from .test_bvh import MALFORMED
@@ -78,7 +78,8 @@ def test_stdin_to_stdout(runner, sample_clip):
 def test_stdin_to_folder_uses_name(runner, sample_clip, tmp_path):
     result = runner.invoke(cli, ["exaggerate", "-", "-o", str(tmp_path), "--name", "take1"], input=sample_clip.read_bytes())
     assert result.exit_code == 0, result.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["take1.bvh", "take1.glb", "take1.json", "take1.weights.npz"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["take1.bvh", "take1.glb", "take1.json", "take1.pipeline.toml",
+                                                             "take1.weights.npz"]
 
 
 @pytest.mark.parametrize("name", sorted(MALFORMED))
@@ -125,7 +126,7 @@ def test_config_file_and_flags(runner, sample_clip, tmp_path):
     info = json.loads((tmp_path / "cmu_09_01_run_daz.json").read_text())
     assert info["config"]["extrapolate"]["omega"] == 4.0
     assert info["config"]["extrapolate"]["weights"] == {"left_arm": 2.0}
-    assert info["stages"] == ["extrapolate", "subjoints", "springs"]
+    assert info["stages"] == ["extrapolate", "subjoints", "springs", "orient"]
     bad = tmp_path / "bad.toml"
     bad.write_text("[correct]\ndelta = 2\n")
     result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "x"), "--config", str(bad)])
@@ -208,7 +209,7 @@ def test_rubber_options_and_original_skeleton(runner, sample_clip, tmp_path):
                                  "--no-springs", "--sublink-length", "3%"])
     assert result.exit_code == 0, result.stderr
     info = json.loads((tmp_path / "c" / "cmu_09_01_run_daz.json").read_text())
-    assert info["stages"] == ["extrapolate", "correct"]
+    assert info["stages"] == ["extrapolate", "correct", "orient"]
 
 
 @pytest.mark.parametrize(
@@ -241,7 +242,8 @@ def test_info_groups(runner, sample_clip):
 def test_glb_options(runner, sample_clip, tmp_path):
     result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "a"), "--no-glb"])
     assert result.exit_code == 0, result.stderr
-    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["cmu_09_01_run_daz.bvh", "cmu_09_01_run_daz.json"]
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["cmu_09_01_run_daz.bvh", "cmu_09_01_run_daz.json",
+                                                                  "cmu_09_01_run_daz.pipeline.toml"]
     result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "b"), "--units", "cm"])
     assert result.exit_code == 0, result.stderr
     info = json.loads((tmp_path / "b" / "cmu_09_01_run_daz.json").read_text())

@@ -17,11 +17,14 @@ from mocap_exaggerate.errors import ConfigError
 
 from mocap_exaggerate.io.gltf import unit_scale
 from mocap_exaggerate.io.bvh import read_bvh
-from mocap_exaggerate.io.skin import Skin, load_skin
-from mocap_exaggerate.pipeline import load_preset, make_glb, resolve_config, run
+from mocap_exaggerate.config import load_preset, resolve_config
+from mocap_exaggerate.io.skin import load_skin
+from mocap_exaggerate.outputs import make_glb
+from mocap_exaggerate.pipeline import run
+from mocap_exaggerate.skinning import Skin
 from mocap_exaggerate.rotations import quat_mul, quat_rotate
-from mocap_exaggerate.stages.body import default_skin
-from mocap_exaggerate.stages.reweight import reweight, segment_distance, subjoint_bind_positions
+from mocap_exaggerate.body import default_skin
+from mocap_exaggerate.skinning import reweight, segment_distance, subjoint_bind_positions
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 
 from .helpers import ROOT, SHARED_BVH, all_clip_params, shared

@@ -6,9 +6,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
-from mocap_exaggerate.pipeline import load_preset, resolve_config, run
-from mocap_exaggerate.rotations import quat_angle, quat_rotate
-from mocap_exaggerate.stages.orient import _triad, quat_between, quat_slerp
+from mocap_exaggerate.config import load_preset, resolve_config
+from mocap_exaggerate.pipeline import run
+from mocap_exaggerate.rotations import quat_angle, quat_between, quat_rotate, quat_slerp
+from mocap_exaggerate.stages.orient import _triad
 
 rng = np.random.default_rng(11)
 

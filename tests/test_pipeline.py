@@ -7,16 +7,10 @@ from mocap_exaggerate import exaggerate, load_bvh
 from mocap_exaggerate.errors import ConfigError
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.limbs import _side_from_name, find_limbs
-from mocap_exaggerate.pipeline import (
-    PipelineConfig,
-    load_preset,
-    preset_names,
-    resolve_config,
-    resolve_weights,
-    run,
-)
+from mocap_exaggerate.config import PipelineConfig, load_preset, preset_names, resolve_config
+from mocap_exaggerate.pipeline import resolve_weights, run
 from mocap_exaggerate.rotations import quat_angle
-from mocap_exaggerate.stages.tpose import detect_rest_frames
+from mocap_exaggerate.tpose import detect_rest_frames
 
 from .helpers import SAMPLE_DIR as ROOT_SAMPLE
 from .helpers import all_clip_params, shared, shared_clip_params

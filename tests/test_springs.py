@@ -7,7 +7,8 @@ from hypothesis import strategies as st
 
 from mocap_exaggerate.errors import ConfigError
 from mocap_exaggerate.io.bvh import read_bvh
-from mocap_exaggerate.pipeline import load_preset, run
+from mocap_exaggerate.config import load_preset
+from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.stages.springs import (
     DAMPING_RANGE,
     STIFFNESS_RANGE,

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from cli.main import cli
+from mocap_exaggerate_cli.main import cli
 from mocap_exaggerate.errors import ConfigError
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.limbs import find_limbs
-from mocap_exaggerate.pipeline import PipelineConfig, resolve_config, run
+from mocap_exaggerate.config import PipelineConfig, resolve_config
+from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.stages.stretch import (
     StretchSpec,
     apply_stretches,

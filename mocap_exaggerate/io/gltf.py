@@ -11,19 +11,15 @@ height.
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import numpy as np
 import pygltflib as gl
 
 from ..errors import ConfigError
 from ..motion import Motion
 from ..rotations import quat_unroll
-from .files import atomic_write
-from .skin import Skin
+from ..skinning import Skin
 
-__all__ = ["UNITS", "unit_scale", "format_glb", "save_glb"]
+__all__ = ["UNITS", "unit_scale", "format_glb"]
 
 #: Metres per unit.
 UNITS = {"m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048, "cmu": 0.0254 / 0.45}
@@ -193,8 +189,3 @@ def format_glb(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
     gltf.set_binary_blob(bytes(buffer.blob))
     return b"".join(gltf.save_to_bytes())
 
-
-def save_glb(motion: Motion, skin: Skin, path: str | os.PathLike, *, meters_per_unit: float = 1.0,
-             overwrite: bool = False) -> None:
-    """Write the GLB atomically."""
-    atomic_write(Path(path), format_glb(motion, skin, meters_per_unit=meters_per_unit), overwrite=overwrite)

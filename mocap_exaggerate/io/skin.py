@@ -1,96 +1,20 @@
-"""Skins: a mesh bound to a skeleton's joints. NPZ and MakeHuman readers, the NPZ writer.
+"""Skin file formats: NPZ, glTF/GLB skinned meshes and MakeHuman (.obj + .mhw) readers, the NPZ bytes writer.
 
-A skin is stored sparsely, as glTF does: for each vertex the indices of its
-strongest joints and their weights, ``(V, K)`` each, rows summing to 1.
+The `Skin` type itself and influence pruning live in `mocap_exaggerate.skinning`.
 """
 
 from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
-from .files import atomic_write
+from ..skinning import Skin, top_influences
 
-__all__ = ["Skin", "load_skin", "load_npz_skin", "load_gltf_skin", "load_makehuman_skin", "skin_to_npz", "npz_bytes", "top_influences"]
-
-
-@dataclass(frozen=True, eq=False)
-class Skin:
-    """A skinned mesh in its bind pose.
-
-    vertices : (V, 3) float64, in the skeleton's units and rest pose
-    faces : (T, 3) int64 triangles
-    joint_names : names of the joints ``joints`` indexes into
-    joints : (V, K) int64 joint indices, 0 where the weight is 0
-    weights : (V, K) float64, each row sums to 1
-    bind : joint name -> (3,) bind-pose position, where the mesh's bind pose
-        is not the skeleton's rest pose (MakeHuman's A-pose); empty otherwise
-    """
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    joint_names: tuple[str, ...]
-    joints: np.ndarray
-    weights: np.ndarray
-    bind: dict = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        v = np.asarray(self.vertices, dtype=np.float64)
-        if v.ndim != 2 or v.shape[1] != 3:
-            raise ValueError(f"vertices must be (V, 3), got {v.shape}")
-        if np.shape(self.joints) != np.shape(self.weights) or np.shape(self.joints)[0] != len(v):
-            raise ValueError(f"joints {np.shape(self.joints)} and weights {np.shape(self.weights)} must be (V, K)")
-        object.__setattr__(self, "vertices", v)
-        object.__setattr__(self, "faces", np.asarray(self.faces, dtype=np.int64).reshape(-1, 3))
-        object.__setattr__(self, "joints", np.asarray(self.joints, dtype=np.int64))
-        object.__setattr__(self, "weights", np.asarray(self.weights, dtype=np.float64))
-        object.__setattr__(self, "joint_names", tuple(self.joint_names))
-
-    @property
-    def num_vertices(self) -> int:
-        return len(self.vertices)
-
-
-def top_influences(rows: np.ndarray, cols: np.ndarray, values: np.ndarray, num_rows: int, k: int):
-    """The ``k`` strongest (column, value) pairs of each row of a sparse matrix, renormalised.
-
-    rows, cols, values : (E,) entries (duplicates are summed)
-    Returns joints (num_rows, k) int64 and weights (num_rows, k) float64; rows
-    without entries get joint 0 with weight 0.
-    """
-    order = np.lexsort((cols, rows))
-    rows, cols, values = rows[order], cols[order], values[order]
-    if len(rows):
-        new = np.concatenate([[True], (rows[1:] != rows[:-1]) | (cols[1:] != cols[:-1])])
-        starts = np.flatnonzero(new)
-        values = np.add.reduceat(values, starts)
-        rows, cols = rows[starts], cols[starts]
-    counts = np.bincount(rows, minlength=num_rows)
-    width = max(int(counts.max(initial=0)), 1)
-    slot = np.arange(len(rows)) - np.repeat(np.cumsum(counts) - counts, counts)
-    dense_w = np.zeros((num_rows, width))
-    dense_j = np.zeros((num_rows, width), dtype=np.int64)
-    dense_w[rows, slot] = values
-    dense_j[rows, slot] = cols
-    if width > k:
-        pick = np.argpartition(-dense_w, k - 1, axis=1)[:, :k]
-        dense_w = np.take_along_axis(dense_w, pick, axis=1)
-        dense_j = np.take_along_axis(dense_j, pick, axis=1)
-    elif width < k:
-        dense_w = np.pad(dense_w, ((0, 0), (0, k - width)))
-        dense_j = np.pad(dense_j, ((0, 0), (0, k - width)))
-    order = np.argsort(-dense_w, axis=1, kind="stable")
-    dense_w = np.take_along_axis(dense_w, order, axis=1)
-    dense_j = np.take_along_axis(dense_j, order, axis=1)
-    total = dense_w.sum(axis=1, keepdims=True)
-    dense_w = np.divide(dense_w, total, out=np.zeros_like(dense_w), where=total > 0)
-    dense_j[dense_w == 0] = 0
-    return dense_j, dense_w
+__all__ = ["load_skin", "load_npz_skin", "load_gltf_skin", "load_makehuman_skin", "npz_bytes"]
 
 
 def load_npz_skin(path: str | os.PathLike) -> Skin:
@@ -250,17 +174,6 @@ def load_skin(path: str | os.PathLike) -> Skin:
     if suffix == ".obj":
         return load_makehuman_skin(path)
     raise InputError("skins are read from .npz, .glb/.gltf or a MakeHuman .obj (+ .mhw)", source=str(path))
-
-
-def skin_to_npz(skin: Skin, path: str | os.PathLike, *, overwrite: bool = False) -> None:
-    """Write a skin as ``.npz`` atomically, byte for byte the same for the same skin."""
-    atomic_write(Path(path), npz_bytes(
-        vertices=skin.vertices,
-        faces=skin.faces,
-        joint_names=np.array(skin.joint_names),
-        joints=skin.joints,
-        weights=skin.weights,
-    ), overwrite=overwrite)
 
 
 def npz_bytes(**arrays: np.ndarray) -> bytes:

@@ -1,11 +1,13 @@
-"""The blocks of the method: each a frozen config and a pure function over arrays."""
+"""The blocks of the method: each a frozen config and a pure function over arrays.
+
+`mocap_exaggerate.pipeline` declares the order they run in.
+"""
 
 from .correct import CorrectConfig, CorrectReport, correct, stretch_error
 from .extrapolate import ExtrapolateConfig, extrapolate, gaussian_average, parse_duration
 from .orient import motion_from_world, recover_orientations
 from .springs import SpringConfig, simulate_springs
 from .subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints
-from .tpose import detect_rest_frames
 
 __all__ = [
     "CorrectConfig",
@@ -16,7 +18,6 @@ __all__ = [
     "SubjointHierarchy",
     "build_hierarchy",
     "correct",
-    "detect_rest_frames",
     "extrapolate",
     "gaussian_average",
     "motion_from_world",

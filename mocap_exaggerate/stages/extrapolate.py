@@ -10,7 +10,6 @@ import re
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
 from ..errors import ConfigError, check_flag, check_number
 
@@ -79,6 +78,8 @@ def gaussian_average(world_pos: np.ndarray, sigma: float, *, axis: int = 0) -> n
     world_pos : (F, ...) float64, time along ``axis``
     sigma : standard deviation in frames; 0 returns a copy
     """
+    from scipy.ndimage import gaussian_filter1d  # imported here: scipy.ndimage takes 0.15 s to load
+
     world_pos = np.asarray(world_pos, dtype=np.float64)
     if sigma <= 0 or world_pos.shape[axis] < 2:
         return world_pos.copy()

@@ -18,90 +18,20 @@ recovered parent.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from ..kinematics import local_from_world
 from ..motion import Motion
-from ..rotations import _cross, quat_mul, quat_normalize, quat_rotate, quat_slerp, slerp_into
+from ..rotations import cross, quat_between, quat_mul, quat_normalize, quat_rotate, quat_slerp
 from .subjoints import SubjointHierarchy
 
-__all__ = ["recover_orientations", "quat_between", "quat_slerp", "motion_from_world"]
+__all__ = ["recover_orientations", "motion_from_world"]
 
 
 def motion_from_world(world_pos, world_rot, skeleton, frame_time, euler_hint=None) -> Motion:
-    """Local 6-DOF channels from world transforms ``(F, J, 3)`` and ``(F, J, 4)``."""
-    world_pos = np.ascontiguousarray(world_pos, dtype=np.float64)
-    world_rot = np.ascontiguousarray(world_rot, dtype=np.float64)
-    local_pos = np.empty_like(world_pos)
-    local_rot = np.empty_like(world_rot)
-    _local_from_world(world_pos, world_rot, np.asarray(skeleton.parents, dtype=np.int64), local_pos, local_rot)
+    """A Motion whose local 6-DOF channels reproduce world transforms ``(F, J, 3)`` and ``(F, J, 4)``."""
+    local_rot, local_pos = local_from_world(skeleton.parents, world_rot, world_pos)
     return Motion(skeleton, frame_time, local_rot, local_pos, euler_hint)
-
-
-@numba.njit(cache=True)
-def _local_from_world(world_pos, world_rot, parents, local_pos, local_rot):  # pragma: no cover - compiled
-    """Each joint's transform in its parent's frame; one pass, no temporaries."""
-    frames, joints = world_pos.shape[0], world_pos.shape[1]
-    for f in range(frames):
-        for a in range(3):
-            local_pos[f, 0, a] = world_pos[f, 0, a]
-        for a in range(4):
-            local_rot[f, 0, a] = world_rot[f, 0, a]
-        for j in range(1, joints):
-            p = parents[j]
-            # Inverse (conjugate) of the parent's rotation.
-            ux, uy, uz, w = -world_rot[f, p, 0], -world_rot[f, p, 1], -world_rot[f, p, 2], world_rot[f, p, 3]
-            vx = world_pos[f, j, 0] - world_pos[f, p, 0]
-            vy = world_pos[f, j, 1] - world_pos[f, p, 1]
-            vz = world_pos[f, j, 2] - world_pos[f, p, 2]
-            tx = 2.0 * (uy * vz - uz * vy)
-            ty = 2.0 * (uz * vx - ux * vz)
-            tz = 2.0 * (ux * vy - uy * vx)
-            local_pos[f, j, 0] = vx + w * tx + (uy * tz - uz * ty)
-            local_pos[f, j, 1] = vy + w * ty + (uz * tx - ux * tz)
-            local_pos[f, j, 2] = vz + w * tz + (ux * ty - uy * tx)
-            bx, by, bz, bw = world_rot[f, j, 0], world_rot[f, j, 1], world_rot[f, j, 2], world_rot[f, j, 3]
-            local_rot[f, j, 0] = w * bx + ux * bw + uy * bz - uz * by
-            local_rot[f, j, 1] = w * by - ux * bz + uy * bw + uz * bx
-            local_rot[f, j, 2] = w * bz + ux * by - uy * bx + uz * bw
-            local_rot[f, j, 3] = w * bw - ux * bx - uy * by - uz * bz
-
-
-@numba.njit(cache=True)
-def _slerp_links(world, first, second, fraction, out, target):  # pragma: no cover - compiled
-    """out[:, target[s]] = slerp(world[:, first[s]], world[:, second[s]], fraction[s])."""
-    for f in range(world.shape[0]):
-        for s in range(first.shape[0]):
-            slerp_into(world[f, first[s]], world[f, second[s]], fraction[s], out[f, target[s]])
-
-
-def quat_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Smallest rotation carrying directions ``u`` onto ``v``, ``(..., 3) -> (..., 4)``.
-
-    Identity where either vector is (nearly) zero; a half turn about some
-    perpendicular axis where they are opposite.
-    """
-    u = np.asarray(u, dtype=np.float64)
-    v = np.asarray(v, dtype=np.float64)
-    nu = np.linalg.norm(u, axis=-1, keepdims=True)
-    nv = np.linalg.norm(v, axis=-1, keepdims=True)
-    q = np.concatenate([_cross(u, v), nu * nv + np.sum(u * v, axis=-1, keepdims=True)], axis=-1)
-    norm = np.linalg.norm(q, axis=-1, keepdims=True)
-    tiny = 1e-12 * np.maximum(nu * nv, 1e-300)
-    opposite = (norm <= tiny) & (nu * nv > 0)
-    if np.any(opposite):
-        # Any axis perpendicular to u: cross with the coordinate axis least aligned with it.
-        axis_index = np.argmin(np.abs(u), axis=-1)
-        helper = np.eye(3)[axis_index]
-        perpendicular = _cross(u, helper)
-        perpendicular /= np.maximum(np.linalg.norm(perpendicular, axis=-1, keepdims=True), 1e-300)
-        flipped = np.concatenate([perpendicular, np.zeros(u.shape[:-1] + (1,))], axis=-1)
-        q = np.where(opposite, flipped, q)
-        norm = np.where(opposite, 1.0, norm)
-    degenerate = (nu * nv <= 1e-300) | (norm <= 0)
-    identity = np.zeros_like(q)
-    identity[..., 3] = 1.0
-    return np.where(degenerate, identity, q / np.where(norm > 0, norm, 1.0))
 
 
 def _triad(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -116,9 +46,9 @@ def _triad(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     def frame(vectors: np.ndarray, pick: int) -> np.ndarray:
         first = vectors.mean(axis=1)
         first /= np.maximum(np.linalg.norm(first, axis=-1, keepdims=True), 1e-300)
-        second = _cross(first, vectors[:, pick])
+        second = cross(first, vectors[:, pick])
         second /= np.maximum(np.linalg.norm(second, axis=-1, keepdims=True), 1e-300)
-        return np.stack([first, second, _cross(first, second)], axis=-1)
+        return np.stack([first, second, cross(first, second)], axis=-1)
 
     middle = len(u) // 2
     mean = u[middle].mean(axis=0)
@@ -231,12 +161,6 @@ def recover_orientations(
     out[:, original] = world
     between = np.flatnonzero(~hierarchy.is_original)
     if len(between):
-        _slerp_links(
-            np.ascontiguousarray(world),
-            hierarchy.link_parent[between].astype(np.int64),
-            hierarchy.link_child[between].astype(np.int64),
-            hierarchy.fraction[between].astype(np.float64),
-            out,
-            between.astype(np.int64),
-        )
+        out[:, between] = quat_slerp(world[:, hierarchy.link_parent[between]], world[:, hierarchy.link_child[between]],
+                                     hierarchy.fraction[between])
     return out, sub_pos

@@ -20,12 +20,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from ..errors import ConfigError, check_flag, check_number
 
-__all__ = ["SpringConfig", "simulate_springs", "spring_substeps", "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE"]
+__all__ = ["SpringConfig", "SpringLinks", "simulate_springs", "spring_links", "spring_substeps", "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE"]
 
 STIFFNESS_RANGE = (0.0, 1e5)
 DAMPING_RANGE = (0.0, 1e4)
@@ -74,7 +75,7 @@ def substeps_for(frame_time: float, stiffness: float, link_stiffness: float, max
 
 
 def _integrate(follow, link_a, link_b, frame_time, substeps, stiffness, link_stiffness, damping):  # pragma: no cover
-    """The time loop (plain Python here; compiled by Numba when imported)."""
+    """The time loop, particle by particle in plain Python: the oracle for the NumPy version."""
     frames, count, _ = follow.shape
     links = link_a.shape[0]
     out = np.empty_like(follow)
@@ -125,16 +126,69 @@ def _integrate(follow, link_a, link_b, frame_time, substeps, stiffness, link_sti
     return out
 
 
-try:  # pragma: no cover - exercised whenever numba is installed (it is a dependency)
-    import numba
+def _integrate_vectorised(follow, link_a, link_b, frame_time, substeps, stiffness, link_stiffness, damping):
+    """The same time loop as `_integrate`, each step one set of NumPy operations over all particles.
 
-    _integrate_compiled = numba.njit(cache=True, fastmath=False)(_integrate)
-except ImportError:  # pragma: no cover
-    _integrate_compiled = _integrate
+    Per frame the anchors and the link springs' rest lengths are computed for
+    every substep at once; the loop over steps is the only one in Python.
+    Springs are summed onto particles by a dense incidence matrix product,
+    which for the few hundred particles of a skeleton costs less than
+    scattering with ``np.add.at``.
+    """
+    frames, count, _ = follow.shape
+    out = np.empty_like(follow)
+    out[0] = follow[0]
+    if frames < 2:
+        return out
+    x = follow[0].copy()
+    v = (follow[1] - follow[0]) / frame_time
+    h = frame_time / substeps
+    denominator = 1.0 + h * damping + h * h * stiffness
+    incidence = np.zeros((len(link_a), count))
+    incidence[np.arange(len(link_a)), link_b] = 1.0
+    incidence[np.arange(len(link_a)), link_a] -= 1.0
+    transposed = np.ascontiguousarray(-incidence.T)
+    alpha = ((np.arange(substeps) + 1.0) / substeps)[:, None, None]
+    step = np.diff(follow, axis=0)
+    # Per frame: the follower's pull and drag that do not depend on the state.
+    drive = h * damping * step / frame_time
+    has_links = len(link_a) > 0
+    for f in range(frames - 1):
+        anchors = follow[f] + alpha * step[f]
+        if has_links:
+            rest_vectors = anchors[:, link_b] - anchors[:, link_a]
+            rests = np.sqrt(np.einsum("slk,slk->sl", rest_vectors, rest_vectors))
+        for s in range(substeps):
+            pull = h * stiffness * anchors[s] + drive[f]
+            if has_links:
+                e = incidence @ x
+                length = np.sqrt(np.einsum("lk,lk->l", e, e))
+                scale = np.divide(length - rests[s], length, out=np.zeros_like(length), where=length > 1e-12)
+                pull = pull + (h * link_stiffness) * (transposed @ (scale[:, None] * e))
+            v = (v + pull - (h * stiffness) * x) / denominator
+            x = x + h * v
+        out[f + 1] = x
+    return out
 
 
-def _spring_links(parents: np.ndarray, active: np.ndarray | None, count: int):
-    """Simulated joints, their link springs as local index pairs, and the largest degree."""
+class SpringLinks(NamedTuple):
+    """Which joints get a suspended particle and which particle pairs are tied by link springs.
+
+    members : (P,) int, the simulated joints
+    link_a, link_b : (L,) int, parent and child particle (indices into members) of each link spring
+    degree : the largest number of link springs on one particle
+    """
+
+    members: np.ndarray
+    link_a: np.ndarray
+    link_b: np.ndarray
+    degree: int
+
+
+def spring_links(parents: np.ndarray, active: np.ndarray | None = None) -> SpringLinks:
+    """The spring topology of a hierarchy: a particle per active joint, a link spring per active link."""
+    parents = np.asarray(parents)
+    count = len(parents)
     active = np.ones(count, bool) if active is None else np.asarray(active, bool)
     members = np.flatnonzero(active)
     local = np.full(count, -1)
@@ -144,13 +198,14 @@ def _spring_links(parents: np.ndarray, active: np.ndarray | None, count: int):
     link_a = local[parents[child]].astype(np.int64)
     link_b = local[child].astype(np.int64)
     degree = np.bincount(np.concatenate([link_a, link_b]), minlength=max(len(members), 1))
-    return members, link_a, link_b, int(degree.max(initial=1))
+    return SpringLinks(members, link_a, link_b, int(degree.max(initial=1)))
 
 
-def spring_substeps(parents: np.ndarray, frame_time: float, config: SpringConfig, active: np.ndarray | None = None) -> int:
+def spring_substeps(parents: np.ndarray, frame_time: float, config: SpringConfig, active: np.ndarray | None = None,
+                    *, links: SpringLinks | None = None) -> int:
     """Substeps per frame `simulate_springs` will take for these settings."""
-    _, _, _, degree = _spring_links(np.asarray(parents), active, len(parents))
-    return substeps_for(frame_time, config.stiffness, config.link_stiffness, degree)
+    links = links or spring_links(parents, active)
+    return substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
 
 
 def simulate_springs(
@@ -163,6 +218,7 @@ def simulate_springs(
     damping: float,
     blend: float,
     active: np.ndarray | None = None,
+    links: SpringLinks | None = None,
     compiled: bool = True,
 ) -> np.ndarray:
     """Blend the suspended particles' motion into ``positions``.
@@ -174,7 +230,8 @@ def simulate_springs(
     frame_time : seconds per frame
     stiffness, link_stiffness, damping, blend : see `SpringConfig`
     active : (J,) bool, joints that get a suspended particle (others copied)
-    compiled : run the Numba kernel (False runs the same loop in Python: the test oracle)
+    links : the topology from `spring_links` (computed from parents and active when None)
+    compiled : False runs the plain per-particle Python loop (the test oracle) instead of the NumPy one
 
     Returns
     -------
@@ -186,10 +243,10 @@ def simulate_springs(
     out = positions.copy()
     if blend == 0 or positions.shape[0] < 2:
         return out
-    members, link_a, link_b, degree = _spring_links(parents, active, positions.shape[1])
+    members, link_a, link_b, degree = links or spring_links(parents, active)
     substeps = substeps_for(frame_time, stiffness, link_stiffness, degree)
     follow = np.ascontiguousarray(positions[:, members])
-    kernel = _integrate_compiled if compiled else _integrate
+    kernel = _integrate_vectorised if compiled else _integrate
     suspended = kernel(follow, link_a, link_b, float(frame_time), substeps, float(stiffness),
                        float(link_stiffness), float(damping))
     out[:, members] = (1.0 - blend) * follow + blend * suspended

@@ -22,11 +22,9 @@ import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from ..errors import ConfigError, check_number
-from ..rotations import quat_rotate
-from .orient import quat_between
+from ..rotations import quat_between, quat_rotate
 from .extrapolate import parse_duration
 
 __all__ = [
@@ -40,6 +38,7 @@ __all__ = [
     "MAX_SCALE",
     "AutoStretchConfig",
     "find_strikes",
+    "overlapping",
 ]
 
 #: The thesis's range of scale: 0 (fully squashed) to 5 (the extreme, a character pulled by a rocket).
@@ -136,6 +135,12 @@ class StretchSpec:
         return out
 
 
+def overlapping(span: tuple[int, int], others) -> bool:
+    """Whether the inclusive frame range ``span`` shares a frame with any ``(first, last)`` in ``others``."""
+    first, last = span
+    return any(first <= b and a <= last for a, b in others)
+
+
 def _frame(value: int | str, frame_time: float, what: str) -> int:
     if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
         return int(value)
@@ -209,6 +214,8 @@ def ease_curve(ease_in: tuple[float, float] | None = None, ease_out: tuple[float
     xs, ys = np.array(xs)[keep], np.array(ys)[keep]
     if len(xs) == 2:
         return lambda r: np.clip(np.asarray(r, dtype=np.float64), 0.0, 1.0)
+    from scipy.interpolate import PchipInterpolator
+
     spline = PchipInterpolator(xs, ys)
     return lambda r: np.clip(spline(np.clip(np.asarray(r, dtype=np.float64), 0.0, 1.0)), 0.0, 1.0)
 
@@ -325,7 +332,7 @@ def apply_stretches(
         first, last = spec.frames(frame_time, frames_total)
         lo, hi = spec.span(frame_time, frames_total)
         for other_lo, other_hi, other in taken.get(spec.limb, []):
-            if lo <= other_hi and other_lo <= hi:
+            if overlapping((lo, hi), [(other_lo, other_hi)]):
                 raise ConfigError(
                     f"stretch {spec.limb}: frames {first}-{last} overlap {other.start}-{other.end} "
                     f"on the same limb (release included); split or merge them"
@@ -486,7 +493,7 @@ def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float
         peaks, _ = find_peaks(speed, height=floor, distance=max(1, int(0.3 / frame_time)))
         window = max(2, int(0.35 / frame_time))
         release = int(round(0.1 / frame_time))
-        chosen: list[tuple[int, int, float]] = []
+        chosen: list[tuple[int, int]] = []
         for peak in sorted(peaks, key=lambda p: -speed[p]):
             stop = min(frames - 1, peak + window)
             end = peak + int(np.argmax(reach[peak : stop + 1]))
@@ -497,11 +504,11 @@ def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float
                 start -= 1
             if reach[end] - reach[start:end + 1].min() < config.min_extension:
                 continue
-            if end - start < 3 or any(start <= b + release and a <= end + release for a, b, _ in chosen):
+            if end - start < 3 or overlapping((start, end + release), [(a, b + release) for a, b in chosen]):
                 continue
-            chosen.append((start, end, float(speed[peak])))
+            chosen.append((start, end))
         scale = config.arm if name.endswith("_arm") else config.leg
-        for start, end, _ in sorted(chosen):
+        for start, end in sorted(chosen):
             specs.append(StretchSpec(limb=name, start=int(start), end=int(end), scale=scale, axes=config.axes,
                                      ease_in=config.ease_in, release="0.1s"))
     return specs

@@ -1,4 +1,9 @@
-"""Skin weight redistribution onto sub-joints (Kwon & Lee 2008, section 6).
+"""Skins: the `Skin` type, influence pruning, and weight redistribution onto sub-joints.
+
+A skin is stored sparsely, as glTF does: for each vertex the indices of its
+strongest joints and their weights, ``(V, K)`` each, rows summing to 1.
+
+Redistribution (Kwon & Lee 2008, section 6):
 
 A vertex bound to original joint k with weight w is re-bound to k's
 sub-joints with weights proportional to the inverse distance from the vertex
@@ -10,27 +15,89 @@ that starts at it (a bone moves with its head joint).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError
-from ..io.skin import Skin, top_influences
-from ..skeleton import Skeleton
-from .subjoints import SubjointHierarchy
+from .errors import ConfigError
+from .skeleton import Skeleton
+from .stages.subjoints import SubjointHierarchy
 
-__all__ = ["reweight", "segment_distance", "subjoint_bind_positions", "ReweightConfig"]
+__all__ = ["Skin", "top_influences", "reweight", "segment_distance", "subjoint_bind_positions"]
 
 
-@dataclass(frozen=True, kw_only=True)
-class ReweightConfig:
-    """max_influences : joints kept per vertex, 4 (one glTF set) or 8 (two sets)."""
+@dataclass(frozen=True, eq=False)
+class Skin:
+    """A skinned mesh in its bind pose.
 
-    max_influences: int = 4
+    vertices : (V, 3) float64, in the skeleton's units and rest pose
+    faces : (T, 3) int64 triangles
+    joint_names : names of the joints ``joints`` indexes into
+    joints : (V, K) int64 joint indices, 0 where the weight is 0
+    weights : (V, K) float64, each row sums to 1
+    bind : joint name -> (3,) bind-pose position, where the mesh's bind pose
+        is not the skeleton's rest pose (MakeHuman's A-pose); empty otherwise
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    joint_names: tuple[str, ...]
+    joints: np.ndarray
+    weights: np.ndarray
+    bind: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.max_influences not in (4, 8):
-            raise ConfigError(f"reweight.max_influences must be 4 or 8, got {self.max_influences!r}")
+        v = np.asarray(self.vertices, dtype=np.float64)
+        if v.ndim != 2 or v.shape[1] != 3:
+            raise ValueError(f"vertices must be (V, 3), got {v.shape}")
+        if np.shape(self.joints) != np.shape(self.weights) or np.shape(self.joints)[0] != len(v):
+            raise ValueError(f"joints {np.shape(self.joints)} and weights {np.shape(self.weights)} must be (V, K)")
+        object.__setattr__(self, "vertices", v)
+        object.__setattr__(self, "faces", np.asarray(self.faces, dtype=np.int64).reshape(-1, 3))
+        object.__setattr__(self, "joints", np.asarray(self.joints, dtype=np.int64))
+        object.__setattr__(self, "weights", np.asarray(self.weights, dtype=np.float64))
+        object.__setattr__(self, "joint_names", tuple(self.joint_names))
+
+    @property
+    def num_vertices(self) -> int:
+        return len(self.vertices)
+
+
+def top_influences(rows: np.ndarray, cols: np.ndarray, values: np.ndarray, num_rows: int, k: int):
+    """The ``k`` strongest (column, value) pairs of each row of a sparse matrix, renormalised.
+
+    rows, cols, values : (E,) entries (duplicates are summed)
+    Returns joints (num_rows, k) int64 and weights (num_rows, k) float64; rows
+    without entries get joint 0 with weight 0.
+    """
+    order = np.lexsort((cols, rows))
+    rows, cols, values = rows[order], cols[order], values[order]
+    if len(rows):
+        new = np.concatenate([[True], (rows[1:] != rows[:-1]) | (cols[1:] != cols[:-1])])
+        starts = np.flatnonzero(new)
+        values = np.add.reduceat(values, starts)
+        rows, cols = rows[starts], cols[starts]
+    counts = np.bincount(rows, minlength=num_rows)
+    width = max(int(counts.max(initial=0)), 1)
+    slot = np.arange(len(rows)) - np.repeat(np.cumsum(counts) - counts, counts)
+    dense_w = np.zeros((num_rows, width))
+    dense_j = np.zeros((num_rows, width), dtype=np.int64)
+    dense_w[rows, slot] = values
+    dense_j[rows, slot] = cols
+    if width > k:
+        pick = np.argpartition(-dense_w, k - 1, axis=1)[:, :k]
+        dense_w = np.take_along_axis(dense_w, pick, axis=1)
+        dense_j = np.take_along_axis(dense_j, pick, axis=1)
+    elif width < k:
+        dense_w = np.pad(dense_w, ((0, 0), (0, k - width)))
+        dense_j = np.pad(dense_j, ((0, 0), (0, k - width)))
+    order = np.argsort(-dense_w, axis=1, kind="stable")
+    dense_w = np.take_along_axis(dense_w, order, axis=1)
+    dense_j = np.take_along_axis(dense_j, order, axis=1)
+    total = dense_w.sum(axis=1, keepdims=True)
+    dense_w = np.divide(dense_w, total, out=np.zeros_like(dense_w), where=total > 0)
+    dense_j[dense_w == 0] = 0
+    return dense_j, dense_w
 
 
 def segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -10,11 +10,9 @@ four nearest links), so joints bend smoothly.
 from __future__ import annotations
 
 import numpy as np
-import trimesh
 
-from ..io.skin import Skin, top_influences
-from ..skeleton import Skeleton
-from .reweight import segment_distance
+from .skeleton import Skeleton
+from .skinning import Skin, segment_distance, top_influences
 
 __all__ = ["default_skin"]
 
@@ -24,6 +22,8 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
 
     rigid : (J,) bool, joints (fingers, toes, face) too small to get their own capsule
     """
+    import trimesh  # imported here: trimesh and manifold3d take 0.15 s to load
+
     rest = skeleton.rest_positions()
     height = skeleton.height()
     heads, tails = [], []
@@ -61,8 +61,10 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     return Skin(vertices, faces, skeleton.names, joints, weights)
 
 
-def _capsule(a: np.ndarray, b: np.ndarray, radius: float) -> trimesh.Trimesh:
-    """A capsule from point ``a`` to ``b``."""
+def _capsule(a: np.ndarray, b: np.ndarray, radius: float):
+    """A capsule (trimesh.Trimesh) from point ``a`` to ``b``."""
+    import trimesh
+
     length = float(np.linalg.norm(b - a))
     capsule = trimesh.creation.capsule(height=length, radius=radius, count=[12, 12])
     # trimesh builds it along Z, centred on the origin.

@@ -1,0 +1,289 @@
+"""The declaration of a pipeline: every block's settings, presets, and TOML.
+
+A pipeline is the ordered list of blocks that are switched on. Its whole
+declaration is a `PipelineConfig`, which round-trips through TOML; the same
+declaration and input give the same output, byte for byte. Precedence when
+resolving one: shipped preset < config file < explicit overrides.
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from dataclasses import asdict, dataclass, field, fields
+from importlib import resources
+from typing import Any
+
+from .errors import ConfigError, check_number
+from .stages.correct import CorrectConfig
+from .stages.extrapolate import ExtrapolateConfig
+from .stages.springs import SpringConfig
+from .stages.stretch import AutoStretchConfig, StretchSpec
+from .stages.subjoints import SubjointConfig
+
+__all__ = [
+    "InputConfig",
+    "OutputConfig",
+    "PipelineConfig",
+    "DEFAULT_PRESET",
+    "preset_names",
+    "load_preset",
+    "preset_description",
+    "resolve_config",
+]
+
+DEFAULT_PRESET = "cartoon"
+_TPOSE_MODES = ("auto", "keep", "drop")
+_SKELETON_MODES = ("sub", "original")
+
+
+@dataclass(frozen=True, kw_only=True)
+class InputConfig:
+    """How the clip is read.
+
+    tpose : ``auto`` detects a synthetic leading rest pose, keeps it out of
+        every filter and writes it back unchanged; ``keep`` treats it as
+        motion; ``drop`` removes it from the output.
+    fps : frame rate overriding the header's ``Frame Time`` (None keeps it).
+    """
+
+    tpose: str = "auto"
+    fps: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.tpose not in _TPOSE_MODES:
+            raise ConfigError(f"input.tpose must be one of {', '.join(_TPOSE_MODES)}, got {self.tpose!r}")
+        if self.fps is not None:
+            check_number("input.fps", self.fps, 0, 10000, low_open=True)
+
+
+@dataclass(frozen=True, kw_only=True)
+class OutputConfig:
+    """What is written.
+
+    skeleton : ``sub`` writes the rubber sub-joint hierarchy; ``original``
+        the original joints only (6 channels each), for pipelines that need
+        the original joint set.
+    """
+
+    skeleton: str = "sub"
+
+    def __post_init__(self) -> None:
+        if self.skeleton not in _SKELETON_MODES:
+            raise ConfigError(f"output.skeleton must be one of {', '.join(_SKELETON_MODES)}, got {self.skeleton!r}")
+
+
+_BLOCKS = {
+    "input": InputConfig,
+    "extrapolate": ExtrapolateConfig,
+    "correct": CorrectConfig,
+    "auto_stretch": AutoStretchConfig,
+    "subjoints": SubjointConfig,
+    "springs": SpringConfig,
+    "output": OutputConfig,
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class PipelineConfig:
+    """Every block's settings: the whole declaration of a run."""
+
+    input: InputConfig = field(default_factory=InputConfig)
+    extrapolate: ExtrapolateConfig = field(default_factory=ExtrapolateConfig)
+    correct: CorrectConfig = field(default_factory=CorrectConfig)
+    subjoints: SubjointConfig = field(default_factory=SubjointConfig)
+    springs: SpringConfig = field(default_factory=SpringConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
+    auto_stretch: AutoStretchConfig = field(default_factory=AutoStretchConfig)
+    stretch: tuple[StretchSpec, ...] = ()
+    limbs: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    description: str = ""
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], *, source: str = "config") -> PipelineConfig:
+        """Build and validate from nested tables; unknown keys are errors naming the key."""
+        if not isinstance(data, dict):
+            raise ConfigError(f"{source}: expected a table of blocks")
+        blocks: dict[str, Any] = {}
+        for key, value in data.items():
+            if key == "description":
+                if not isinstance(value, str):
+                    raise ConfigError(f"{source}: description must be text")
+                blocks["description"] = value
+                continue
+            if key == "stretch":
+                blocks["stretch"] = _stretch_from_list(value, source)
+                continue
+            if key == "limbs":
+                blocks["limbs"] = _limbs_from_table(value, source)
+                continue
+            if key not in _BLOCKS:
+                known = ", ".join(list(_BLOCKS) + ["limbs", "[stretch]"])
+                raise ConfigError(f"{source}: unknown block [{key}] (known: {known})")
+            if not isinstance(value, dict):
+                raise ConfigError(f"{source}: [{key}] must be a table")
+            block_type = _BLOCKS[key]
+            known = {f.name for f in fields(block_type)}
+            values = {}
+            for name, item in value.items():
+                if name not in known:
+                    raise ConfigError(f"{source}: unknown key {key}.{name} (known: {', '.join(sorted(known))})")
+                values[name] = item
+            if key == "extrapolate" and "weights" in values:
+                values["weights"] = _weights_from_table(values["weights"], source)
+            for integer in ("max_iter", "per_link"):
+                if isinstance(values.get(integer), float) and values[integer].is_integer():
+                    values[integer] = int(values[integer])
+            for listed in ("groups", "rigid"):
+                if listed in values and not isinstance(values[listed], (list, tuple)):
+                    raise ConfigError(f"{source}: {key}.{listed} must be a list")
+            try:
+                blocks[key] = block_type(**values)
+            except ConfigError as error:
+                raise ConfigError(f"{source}: {error}") from None
+            except TypeError as error:
+                raise ConfigError(f"{source}: [{key}]: {error}") from None
+        try:
+            return cls(**blocks)
+        except ConfigError as error:
+            raise ConfigError(f"{source}: {error}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Nested plain tables (TOML-ready: None values are left out)."""
+        out: dict[str, Any] = {}
+        if self.description:
+            out["description"] = self.description
+        for name in _BLOCKS:
+            table = asdict(getattr(self, name))
+            if name == "extrapolate":
+                table["weights"] = {pattern: float(w) for pattern, w in self.extrapolate.weights}
+            if name == "subjoints":
+                table["groups"] = [list(g) for g in self.subjoints.groups]
+                table["rigid"] = list(self.subjoints.rigid)
+            out[name] = {k: v for k, v in table.items() if v is not None}
+        if self.limbs:
+            out["limbs"] = {name: list(chain) for name, chain in self.limbs}
+        if self.stretch:
+            out["stretch"] = [spec.to_dict() for spec in self.stretch]
+        return out
+
+    @classmethod
+    def from_toml(cls, text: str, *, source: str = "config") -> PipelineConfig:
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as error:
+            raise ConfigError(f"{source}: not valid TOML: {error}") from None
+        return cls.from_dict(data, source=source)
+
+    def to_toml(self) -> str:
+        """The declaration as TOML text; `from_toml` of it gives an equal config."""
+        import tomli_w
+
+        return tomli_w.dumps(self.to_dict())
+
+
+def _stretch_from_list(items: Any, source: str) -> tuple[StretchSpec, ...]:
+    if not isinstance(items, (list, tuple)):
+        raise ConfigError(f"{source}: stretch must be a list of tables ([[stretch]])")
+    specs = []
+    known = {f.name for f in fields(StretchSpec)}
+    for number, item in enumerate(items, start=1):
+        if not isinstance(item, dict):
+            raise ConfigError(f"{source}: stretch #{number} must be a table")
+        unknown = set(item) - known
+        if unknown:
+            raise ConfigError(f"{source}: stretch #{number}: unknown key {sorted(unknown)[0]} (known: {', '.join(sorted(known))})")
+        missing = {"limb", "start", "end", "scale"} - set(item)
+        if missing:
+            raise ConfigError(f"{source}: stretch #{number}: missing {', '.join(sorted(missing))}")
+        values = dict(item)
+        for ease in ("ease_in", "ease_out"):
+            if isinstance(values.get(ease), list):
+                values[ease] = tuple(values[ease])
+        try:
+            specs.append(StretchSpec(**values))
+        except ConfigError as error:
+            raise ConfigError(f"{source}: stretch #{number}: {error}") from None
+    return tuple(specs)
+
+
+def _limbs_from_table(table: Any, source: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    if not isinstance(table, dict):
+        raise ConfigError(f"{source}: [limbs] must be a table of name = [joints]")
+    out = []
+    for name, chain in table.items():
+        if not isinstance(chain, (list, tuple)) or len(chain) < 2 or not all(isinstance(n, str) for n in chain):
+            raise ConfigError(f"{source}: limbs.{name} must list at least two joint names, base first")
+        out.append((str(name), tuple(chain)))
+    return tuple(out)
+
+
+def _weights_from_table(table: Any, source: str) -> tuple[tuple[str, float], ...]:
+    if isinstance(table, dict):
+        items = list(table.items())
+    elif isinstance(table, (list, tuple)):
+        items = [tuple(item) for item in table]
+    else:
+        raise ConfigError(f"{source}: extrapolate.weights must be a table of name = weight")
+    out = []
+    for pattern, weight in items:
+        if isinstance(weight, bool) or not isinstance(weight, (int, float)):
+            raise ConfigError(f"{source}: extrapolate.weights[{pattern!r}] must be a number, got {weight!r}")
+        out.append((str(pattern), float(weight)))
+    return tuple(out)
+
+
+# ---------------------------------------------------------------------------- presets
+
+
+def preset_names() -> list[str]:
+    """Names of the shipped presets."""
+    folder = resources.files("mocap_exaggerate") / "presets"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def _preset_table(name: str) -> dict[str, Any]:
+    if name not in preset_names():
+        raise ConfigError(f"unknown preset {name!r} (known: {', '.join(preset_names())})")
+    text = (resources.files("mocap_exaggerate") / "presets" / f"{name}.toml").read_text(encoding="utf-8")
+    return tomllib.loads(text)
+
+
+def load_preset(name: str) -> PipelineConfig:
+    """A shipped preset as a PipelineConfig."""
+    return PipelineConfig.from_dict(_preset_table(name), source=f"preset {name}")
+
+
+def preset_description(name: str) -> str:
+    return str(_preset_table(name).get("description", ""))
+
+
+def _merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+    out = copy.deepcopy(base)
+    for key, value in top.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def resolve_config(
+    preset: str | None = DEFAULT_PRESET,
+    config_text: str | None = None,
+    overrides: dict[str, Any] | None = None,
+    *,
+    config_source: str = "config",
+) -> PipelineConfig:
+    """Shipped preset < config file < explicit overrides (nested tables), validated."""
+    table: dict[str, Any] = _preset_table(preset) if preset else {}
+    if config_text is not None:
+        try:
+            file_table = tomllib.loads(config_text)
+        except tomllib.TOMLDecodeError as error:
+            raise ConfigError(f"{config_source}: not valid TOML: {error}") from None
+        PipelineConfig.from_dict(file_table, source=config_source)  # name the file in its own errors
+        table = _merge(table, file_table)
+    if overrides:
+        table = _merge(table, overrides)
+    return PipelineConfig.from_dict(table, source=config_source if config_text is not None else "options")

@@ -1,0 +1,299 @@
+"""The whole job for one clip: read, check every target, run, write the output set.
+
+`convert` is what the ``exaggerate`` command runs, and what a batch worker
+or a farm task calls: it takes a path, bytes or a stream, writes
+``<name>.bvh``, ``.glb``, ``.weights.npz``, ``.pipeline.toml`` and the
+``.json`` manifest into a folder (or the BVH alone to a stream), and returns
+a `JobRecord`. Every target is checked before anything runs, and the files
+are written as one set, manifest last: a refusal or a failure writes nothing.
+
+Example::
+
+    from mocap_exaggerate import convert, load_preset
+    record = convert("walk.bvh", "out/", load_preset("looney"))
+    record.outputs["bvh"]      # Path('out/walk.bvh')
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from .config import DEFAULT_PRESET, PipelineConfig, load_preset
+from .errors import ConfigError, InputError
+from .io.bvh import format_bvh, read_bvh
+from .io.files import OutputExistsError, same_file, write_files
+from .limbs import find_limbs
+from .pipeline import PipelineResult, run
+from .skinning import Skin
+from .tpose import detect_rest_frames
+
+__all__ = ["JobRecord", "convert", "output_paths", "check_name", "check_targets", "describe"]
+
+#: Longest output name accepted: leaves room for suffixes and temporary names within 255 bytes.
+MAX_NAME = 200
+
+Source = str | os.PathLike | bytes | BinaryIO
+
+
+@dataclass
+class JobRecord:
+    """What one `convert` call did.
+
+    input : the input as named in messages
+    outputs : kind (``bvh``, ``glb``, ``weights``, ``pipeline``, ``trails``, ``manifest``) -> path written
+    frames, joints : of the output motion
+    max_link_stretch : largest link length over its rest length, after the stretch pass
+    seconds : wall time of the whole job
+    warnings : what the reader noticed in the input (extra lines, a frame rate overridden)
+    notes : what the pipeline did that the user should hear about (rest frames, stretches found)
+    manifest : the manifest as written (None when the BVH went to a stream)
+    result : the pipeline's result (positions, hierarchy, figures)
+    """
+
+    input: str
+    outputs: dict[str, Path]
+    frames: int
+    joints: int
+    max_link_stretch: float
+    seconds: float
+    warnings: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    manifest: dict[str, Any] | None = None
+    result: PipelineResult | None = None
+
+
+def check_name(name: str) -> str:
+    """``name`` if it is a plain file name for the outputs; ConfigError saying why not otherwise."""
+    if not isinstance(name, str) or not name.strip():
+        raise ConfigError("output name is empty")
+    if "/" in name or "\\" in name or os.sep in name or (os.altsep and os.altsep in name):
+        raise ConfigError(f"output name {name!r} must be a file name, without folders")
+    if name in (".", "..") or name.startswith("."):
+        raise ConfigError(f"output name {name!r} must not start with a dot")
+    if "\x00" in name or any(ord(c) < 32 for c in name):
+        raise ConfigError(f"output name {name!r} has control characters")
+    if len(name.encode("utf-8")) > MAX_NAME:
+        raise ConfigError(f"output name is {len(name.encode('utf-8'))} bytes long; at most {MAX_NAME}")
+    return name
+
+
+def output_paths(folder: str | os.PathLike, name: str, *, glb: bool = True,
+                 trails: str | os.PathLike | None = None) -> dict[str, Path]:
+    """The files a job writes, by kind, in the order they are written (manifest last)."""
+    folder = Path(folder)
+    name = check_name(name)
+    paths = {"bvh": folder / f"{name}.bvh"}
+    if glb:
+        paths["glb"] = folder / f"{name}.glb"
+        paths["weights"] = folder / f"{name}.weights.npz"
+    paths["pipeline"] = folder / f"{name}.pipeline.toml"
+    if trails is not None:
+        paths["trails"] = Path(trails)
+    paths["manifest"] = folder / f"{name}.json"
+    return paths
+
+
+def _read_input(source: Source, label: str | None) -> tuple[bytes, str, str]:
+    """The input's bytes, its label for messages and a default output name."""
+    if isinstance(source, (bytes, bytearray)):
+        return bytes(source), label or "<bytes>", "clip"
+    if hasattr(source, "read"):
+        data = source.read()
+        name = label or getattr(source, "name", None) or "<stream>"
+        return (data.encode("utf-8") if isinstance(data, str) else data), str(name), "stdin"
+    path = Path(source)
+    label = label or str(path)
+    try:
+        return path.read_bytes(), label, path.stem
+    except FileNotFoundError:
+        raise InputError("no such file", source=label) from None
+    except IsADirectoryError:
+        raise InputError("is a folder; give a .bvh file", source=label) from None
+    except PermissionError:
+        raise InputError("permission denied", source=label) from None
+
+
+def check_targets(targets: dict[str, Path], inputs: list[Path], overwrite: bool) -> None:
+    """Refuse, before anything runs, targets that are an input, a folder, taken, or named twice."""
+    for kind, path in targets.items():
+        for given in inputs:
+            if path.exists() and same_file(path, given) or path.resolve() == given.resolve():
+                raise ConfigError(f"{path}: would overwrite the input {given}; choose another output folder or name")
+        if path.is_dir():
+            raise ConfigError(f"{path}: is a folder, so the {kind} output cannot be written there")
+        if path.exists() and not overwrite:
+            raise OutputExistsError(path)
+    names = [p.resolve() for p in targets.values()]
+    if len(set(names)) != len(names):
+        raise ConfigError("two outputs would be written to the same file")
+
+
+def convert(
+    source: Source,
+    output: str | os.PathLike | BinaryIO,
+    config: PipelineConfig | None = None,
+    *,
+    preset: str | None = None,
+    name: str | None = None,
+    label: str | None = None,
+    overwrite: bool = False,
+    glb: bool = True,
+    skin: Skin | str | os.PathLike | None = None,
+    units: str = "auto",
+    influences: int = 4,
+    trails: str | os.PathLike | None = None,
+    path_file: str | os.PathLike | None = None,
+) -> JobRecord:
+    """Exaggerate one clip and write its output set.
+
+    Parameters
+    ----------
+    source : a BVH path, its bytes, or a binary stream
+    output : a folder (created if needed), or a binary stream that gets the BVH alone
+    config : the resolved pipeline (default: the ``preset``, else the default preset)
+    preset : recorded in the manifest; also the config when ``config`` is None
+    name : output file stem (default: the input's stem; ``stdin`` for a stream)
+    label : how to call the input in messages (default: its path)
+    overwrite : replace outputs that exist (an input is never replaced)
+    glb : also write the skinned GLB and the re-weighted skin
+    skin : a `Skin` or a skin file for the GLB (default: a body grown from the skeleton)
+    units, influences : the GLB's units (``auto``, ``cm``, ...) and joints per vertex (4 or 8)
+    trails : also write every stretch's end-effector paths to this JSON file
+    path_file : a trails file with edited paths for the limbs to follow
+
+    Returns
+    -------
+    JobRecord
+
+    Raises
+    ------
+    InputError, ConfigError
+        for a bad input file or setting, before anything is written
+    OutputExistsError
+        when a target exists and ``overwrite`` is false
+    OSError
+        when writing fails; nothing of the set is left behind then
+    """
+    started = time.perf_counter()
+    if config is None:
+        config = load_preset(preset or DEFAULT_PRESET)
+    to_stream = hasattr(output, "write")
+    inputs = [Path(p) for p in (source, path_file, skin) if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
+    data, label, default_name = _read_input(source, label)
+    stem = check_name(name if name is not None else default_name)
+    if to_stream:
+        targets = {"trails": Path(trails)} if trails is not None else {}
+    else:
+        folder = Path(output)
+        if folder.exists() and not folder.is_dir():
+            raise ConfigError(f"{folder}: exists and is not a folder")
+        targets = output_paths(folder, stem, glb=glb, trails=trails)
+    check_targets(targets, inputs, overwrite)
+
+    from .io.skin import load_skin
+    from .io.trails import read_trails
+
+    paths = read_trails(path_file) if path_file is not None else None
+    if skin is not None and not isinstance(skin, Skin):
+        skin = load_skin(skin)
+
+    timings: dict[str, float] = {}
+    motion, report = read_bvh(data, name=label, fps=config.input.fps)
+    timings["read"] = time.perf_counter() - started
+    result = run(motion, config, paths=paths)
+    timings.update(result.timings)
+    tick = time.perf_counter()
+    files: dict[str, bytes] = {"bvh": format_bvh(result.motion)}
+    timings["write"] = time.perf_counter() - tick
+    units_used = None
+    if glb and not to_stream:
+        from .outputs import make_glb
+
+        tick = time.perf_counter()
+        files["glb"], files["weights"], units_used = make_glb(motion, result, skin, units, influences)
+        timings["glb"] = time.perf_counter() - tick
+    if trails is not None:
+        from .io.trails import format_trails
+
+        files["trails"] = format_trails(result.stretch.trails if result.stretch else [], source=label,
+                                        fps=motion.fps)
+
+    info = None
+    if to_stream:
+        output.write(files.pop("bvh"))
+        if hasattr(output, "flush"):
+            output.flush()
+        write_files([(targets[kind], files[kind]) for kind in files], overwrite=True)
+    else:
+        from .outputs import file_digest, manifest
+
+        files["pipeline"] = config.to_toml().encode("utf-8")
+        outputs: dict[str, Any] = {kind: targets[kind].name for kind in files}
+        if "trails" in files:
+            outputs["trails"] = str(targets["trails"])
+        if units_used:
+            outputs["units"] = units_used
+        outputs["hashes"] = {kind: file_digest(files[kind]) for kind in files}
+        timings["total"] = time.perf_counter() - started
+        info = manifest(input_name=label, input_bytes=data, config=config, preset=preset, result=result,
+                        outputs=outputs, reader_warnings=report.warnings, frames_in=motion.num_frames,
+                        fps=motion.fps, timings=timings)
+        files["manifest"] = (json.dumps(info, indent=2) + "\n").encode("utf-8")
+        write_files([(targets[kind], files[kind]) for kind in targets], overwrite=True)
+    return JobRecord(
+        input=label,
+        outputs={kind: path for kind, path in targets.items() if kind in files or kind == "manifest"},
+        frames=result.motion.num_frames,
+        joints=result.motion.skeleton.num_joints,
+        max_link_stretch=result.max_link_stretch,
+        seconds=time.perf_counter() - started,
+        warnings=list(report.warnings),
+        notes=list(result.notes),
+        manifest=info,
+        result=result,
+    )
+
+
+def describe(source: Source, *, fps: float | None = None, limbs: bool = False, groups: bool = False,
+             label: str | None = None) -> dict[str, Any]:
+    """What ``info`` shows about a clip, as plain data (JSON-ready)."""
+    motion, report = read_bvh(source, name=label, fps=fps)
+    skeleton = motion.skeleton
+    orders: dict[str, int] = {}
+    for j in range(skeleton.num_joints):
+        if skeleton.channels[j]:
+            orders[skeleton.rotation_order(j)] = orders.get(skeleton.rotation_order(j), 0) + 1
+    data: dict[str, Any] = {
+        "file": report.source,
+        "joints": skeleton.num_joints,
+        "root": skeleton.names[0],
+        "end_sites": int(np.isfinite(skeleton.end_sites[:, 0]).sum()),
+        "channels": skeleton.num_channels,
+        "position_channel_joints": [skeleton.names[j] for j in range(skeleton.num_joints)
+                                    if skeleton.has_position_channels(j)],
+        "rotation_orders": orders,
+        "frames": motion.num_frames,
+        "fps": round(motion.fps, 6),
+        "duration_s": round(motion.duration, 6),
+        "up_axis": "XYZ"[skeleton.up_axis()],
+        "height": round(skeleton.height(), 4),
+        "rest_frames": detect_rest_frames(motion),
+        "warnings": report.warnings,
+    }
+    if limbs:
+        data["limbs"] = {name: [skeleton.names[j] for j in limb.joints] for name, limb in find_limbs(skeleton).items()}
+    if groups:
+        from .stages.subjoints import build_hierarchy
+
+        hierarchy = build_hierarchy(skeleton)
+        data["groups"] = [[skeleton.names[j] for j in chain] for chain in hierarchy.groups]
+        data["rigid"] = [skeleton.names[j] for j in np.flatnonzero(hierarchy.rigid)]
+        data["subjoints"] = hierarchy.skeleton.num_joints
+    return data

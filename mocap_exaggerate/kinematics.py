@@ -1,0 +1,70 @@
+"""Forward kinematics, world-to-local and rest positions over whole clips.
+
+A skeleton here is its ``parents`` vector (-1 for the root, every parent
+before its children); transforms are arrays ``(F, J, ...)``. Forward
+kinematics loops over joints only, every frame at once; world-to-local (the
+"ik" of orangeduck's and LAFAN1's code) needs no loop at all:
+``local_rot = quat_inv(parent_rot) * world_rot``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .rotations import quat_inv, quat_mul, quat_rotate
+
+__all__ = ["forward_kinematics", "local_from_world", "rest_positions"]
+
+
+def forward_kinematics(
+    parents: np.ndarray, local_rot: np.ndarray, local_pos: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations ``(F, J, 4)`` and positions ``(F, J, 3)`` from local transforms.
+
+    parents : (J,) int, -1 for the root, ``parents[j] < j``
+    local_rot : (F, J, 4) float64 unit quaternions, each joint's rotation in its parent's frame
+    local_pos : (F, J, 3) float64, each joint's translation from its parent (the root's: world)
+
+    The work is done joint by joint on ``(J, F, ...)`` copies, so each
+    joint's frames are contiguous in memory.
+    """
+    parents = np.asarray(parents)
+    rot = np.ascontiguousarray(np.swapaxes(local_rot, 0, 1), dtype=np.float64)
+    pos = np.ascontiguousarray(np.swapaxes(local_pos, 0, 1), dtype=np.float64)
+    for j in range(1, len(parents)):
+        p = parents[j]
+        pos[j] = pos[p] + quat_rotate(rot[p], pos[j])
+        rot[j] = quat_mul(rot[p], rot[j])
+    return np.swapaxes(rot, 0, 1), np.swapaxes(pos, 0, 1)
+
+
+def local_from_world(
+    parents: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Local rotations ``(F, J, 4)`` and translations ``(F, J, 3)`` from world transforms.
+
+    The inverse of `forward_kinematics`, loop-free: each joint's transform
+    in its parent's frame.
+    """
+    parents = np.asarray(parents)
+    world_rot = np.asarray(world_rot, dtype=np.float64)
+    world_pos = np.asarray(world_pos, dtype=np.float64)
+    local_rot = np.empty(world_rot.shape)
+    local_pos = np.empty(world_pos.shape)
+    local_rot[:, 0] = world_rot[:, 0]
+    local_pos[:, 0] = world_pos[:, 0]
+    if len(parents) > 1:
+        inverse = quat_inv(world_rot[:, parents[1:]])
+        local_rot[:, 1:] = quat_mul(inverse, world_rot[:, 1:])
+        local_pos[:, 1:] = quat_rotate(inverse, world_pos[:, 1:] - world_pos[:, parents[1:]])
+    return local_rot, local_pos
+
+
+def rest_positions(parents: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """World positions ``(J, 3)`` of the joints when every rotation is zero (offsets only)."""
+    offsets = np.asarray(offsets, dtype=np.float64)
+    pos = np.zeros(offsets.shape)
+    pos[0] = offsets[0]
+    for j in range(1, len(parents)):
+        pos[j] = pos[parents[j]] + offsets[j]
+    return pos

@@ -1,0 +1,172 @@
+"""What a run turns into: the manifest, the skin bound to the output skeleton, the GLB bytes.
+
+Everything here returns bytes or plain data; `mocap_exaggerate.job` decides
+where they go and writes them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .config import PipelineConfig
+from .errors import ConfigError
+from .motion import Motion
+from .pipeline import PipelineResult
+from .skinning import Skin, top_influences
+
+__all__ = ["file_digest", "manifest", "output_thickness", "base_skin", "output_skin", "make_glb"]
+
+
+def file_digest(data: bytes) -> str:
+    return "sha256:" + hashlib.sha256(data).hexdigest()
+
+
+def manifest(
+    *,
+    input_name: str,
+    input_bytes: bytes,
+    config: PipelineConfig,
+    preset: str | None,
+    result: PipelineResult,
+    outputs: dict[str, str],
+    reader_warnings: list[str],
+    frames_in: int,
+    fps: float,
+    timings: dict[str, float],
+) -> dict[str, Any]:
+    """The JSON manifest that records how an output was made.
+
+    Timings are the only part that varies between identical runs; they are
+    kept apart under ``timings`` so a comparison can ignore them.
+    """
+    info: dict[str, Any] = {
+        "tool": "mocap_exaggerate",
+        "version": __version__,
+        "input": {"file": input_name, "hash": file_digest(input_bytes), "frames": frames_in, "fps": fps},
+        "preset": preset,
+        "config": config.to_dict(),
+        "stages": list(result.stages),
+        "rest_frames": {"count": result.rest_frames, "dropped": result.rest_frames_dropped},
+        "outputs": outputs,
+        "result": {
+            "frames": result.motion.num_frames,
+            "joints": result.motion.skeleton.num_joints,
+            "max_link_stretch": round(result.max_link_stretch, 6),
+            "skeleton": config.output.skeleton,
+        },
+        "warnings": list(reader_warnings) + list(result.notes),
+        "timings": timings,
+    }
+    if result.hierarchy is not None:
+        names = result.hierarchy.skeleton.names
+        info["result"]["subjoints"] = result.hierarchy.skeleton.num_joints
+        info["result"]["groups"] = [[names[result.hierarchy.original[j]] for j in chain] for chain in result.hierarchy.groups]
+    if result.substeps:
+        info["result"]["spring_substeps"] = result.substeps
+    if result.stretch is not None:
+        info["result"]["stretch"] = result.stretch.events
+    if result.correct_report is not None:
+        info["result"]["correct"] = {
+            k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(result.correct_report).items()
+        }
+    return info
+
+
+def output_thickness(result: PipelineResult) -> np.ndarray | None:
+    """World scale ``(F, J_out)`` per output joint for volume preservation, or None without a stretch pass.
+
+    A joint's bone runs to its child: a sub-joint takes the stretch of the link
+    it lies on, an original joint the largest stretch among its outgoing links;
+    thickness is ``1 / sqrt(stretch)``.
+    """
+    if result.stretch is None:
+        return None
+    factors = result.stretch.stretch_factors  # (F, J): the link ending at each original joint
+    hierarchy = result.hierarchy
+    parents = _original_parents(result)
+    outgoing = np.ones_like(factors)
+    np.maximum.at(outgoing.T, parents[1:], factors[:, 1:].T)
+    if hierarchy is not None and result.motion.skeleton is hierarchy.skeleton:
+        between = hierarchy.fraction < 1.0
+        stretch = np.where(between[None, :], factors[:, hierarchy.link_child], outgoing[:, hierarchy.link_child])
+    else:
+        stretch = outgoing
+    return 1.0 / np.sqrt(np.maximum(stretch, 1e-6))
+
+
+def _original_parents(result: PipelineResult) -> np.ndarray:
+    hierarchy = result.hierarchy
+    if hierarchy is not None:
+        parents = np.full(len(hierarchy.original), -1)
+        originals = hierarchy.is_original
+        parents[hierarchy.link_child[originals]] = hierarchy.link_parent[originals]
+        return parents
+    return np.asarray(result.motion.skeleton.parents)
+
+
+def base_skin(motion: Motion, result: PipelineResult, skin: Skin | None = None) -> Skin:
+    """The skin on the clip's own joints: ``skin`` (checked against the rest pose) or the default body."""
+    skeleton = motion.skeleton
+    hierarchy = result.hierarchy
+    if skin is None:
+        from .body import default_skin
+
+        return default_skin(skeleton, hierarchy.rigid if hierarchy is not None else None)
+    if skin.bind:
+        # A skin with its own bind pose must have been bound in the clip's rest pose.
+        rest = skeleton.rest_positions()
+        off = [np.linalg.norm(np.asarray(p) - rest[skeleton.index(n)]) for n, p in skin.bind.items()
+               if n in skeleton.names]
+        if not off:
+            raise ConfigError("none of the skin's joints is named like a joint of the clip")
+        if max(off) > 1e-3 * skeleton.height():
+            raise ConfigError(f"the skin's bind pose is not the clip's rest pose (joints up to {max(off):.3g} "
+                              "units away); bind it in the BVH's rest pose")
+    return skin
+
+
+def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: int = 4) -> Skin:
+    """``skin`` (on the clip's joints) bound to the output skeleton, with at most ``influences`` per vertex.
+
+    On the rubber skeleton the weights are redistributed onto the sub-joints
+    (`mocap_exaggerate.skinning.reweight`); on the original one the strongest
+    influences are kept.
+    """
+    from .skinning import reweight
+
+    if influences not in (4, 8):
+        raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
+    hierarchy = result.hierarchy
+    if hierarchy is not None and result.motion.skeleton is hierarchy.skeleton:
+        return reweight(skin, motion.skeleton, hierarchy, max_influences=influences)
+    if skin.joints.shape[1] > influences:
+        rows = np.repeat(np.arange(skin.num_vertices), skin.joints.shape[1])
+        joints, weights = top_influences(rows, skin.joints.ravel(), skin.weights.ravel(), skin.num_vertices, influences)
+        return Skin(skin.vertices, skin.faces, skin.joint_names, joints, weights, skin.bind)
+    return skin
+
+
+def make_glb(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
+             influences: int = 4) -> tuple[bytes, bytes, str]:
+    """The skinned GLB of a run, its skin as ``.npz`` bytes, and how the units were decided.
+
+    motion : the captured clip the run started from
+    skin : bound to ``motion``'s joints in its rest pose, or None for the
+        default body grown from the skeleton
+    """
+    from .io.gltf import format_glb, unit_scale
+    from .io.skin import npz_bytes
+
+    if influences not in (4, 8):
+        raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
+    scale, how = unit_scale(units, motion.skeleton.height())
+    bound = output_skin(motion, result, base_skin(motion, result, skin), influences)
+    glb = format_glb(result.motion, bound, meters_per_unit=scale, thickness=output_thickness(result))
+    weights = npz_bytes(joint_names=np.array(bound.joint_names), joints=bound.joints, weights=bound.weights,
+                        vertices=bound.vertices, faces=bound.faces)
+    return glb, weights, how
