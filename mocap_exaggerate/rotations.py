@@ -17,8 +17,6 @@ Every function broadcasts over leading axes and never mutates its input.
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 __all__ = [
@@ -33,6 +31,8 @@ __all__ = [
     "quat_from_axis_angle",
     "quat_from_euler",
     "quat_to_euler",
+    "quat_to_matrix",
+    "quat_from_matrix",
     "quat_unroll",
     "cross",
 ]
@@ -178,6 +178,73 @@ def quat_from_euler(euler: np.ndarray, order: str) -> np.ndarray:
     return quat_mul(q, quat_from_axis_angle(order[2], radians[..., 2]))
 
 
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (they act on column vectors)."""
+    x, y, z, w = _parts(q)
+    out = np.empty(np.shape(q)[:-1] + (3, 3))
+    out[..., 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    out[..., 0, 1] = 2.0 * (x * y - z * w)
+    out[..., 0, 2] = 2.0 * (x * z + y * w)
+    out[..., 1, 0] = 2.0 * (x * y + z * w)
+    out[..., 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    out[..., 1, 2] = 2.0 * (y * z - x * w)
+    out[..., 2, 0] = 2.0 * (x * z - y * w)
+    out[..., 2, 1] = 2.0 * (y * z + x * w)
+    out[..., 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return out
+
+
+def quat_from_matrix(matrix: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(..., 4)`` of rotation matrices ``(..., 3, 3)`` (Shepperd's method).
+
+    Each quaternion is taken from the largest of its four squared
+    components, so no division is by a small number.
+    """
+    m = np.asarray(matrix, dtype=np.float64)
+    trace = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
+    # 4 * component^2 for x, y, z, w
+    squares = np.stack([1.0 + 2.0 * m[..., 0, 0] - trace, 1.0 + 2.0 * m[..., 1, 1] - trace,
+                        1.0 + 2.0 * m[..., 2, 2] - trace, 1.0 + trace], axis=-1)
+    pick = np.argmax(squares, axis=-1)
+    out = np.empty(m.shape[:-2] + (4,))
+    for k in range(4):
+        chosen = pick == k
+        if not np.any(chosen):
+            continue
+        big = np.sqrt(np.maximum(squares[chosen, k], 1e-300))
+        part = np.empty((int(chosen.sum()), 4))
+        part[:, k] = 0.5 * big
+        sub = m[chosen]
+        if k == 3:
+            part[:, 0] = (sub[:, 2, 1] - sub[:, 1, 2]) / (2.0 * big)
+            part[:, 1] = (sub[:, 0, 2] - sub[:, 2, 0]) / (2.0 * big)
+            part[:, 2] = (sub[:, 1, 0] - sub[:, 0, 1]) / (2.0 * big)
+        else:
+            i, j, l = k, (k + 1) % 3, (k + 2) % 3
+            part[:, j] = (sub[:, j, i] + sub[:, i, j]) / (2.0 * big)
+            part[:, l] = (sub[:, l, i] + sub[:, i, l]) / (2.0 * big)
+            part[:, 3] = (sub[:, l, j] - sub[:, j, l]) / (2.0 * big)
+        out[chosen] = part
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def _euler_from_matrix(matrix: np.ndarray, order: str) -> np.ndarray:
+    """Intrinsic Tait-Bryan angles in degrees for ``R = R_i(a) R_j(b) R_k(c)``, order ``"ijk"``.
+
+    ``b = asin(s R[i, k])``, ``a = atan2(-s R[j, k], R[k, k])``,
+    ``c = atan2(-s R[i, j], R[i, i])`` with ``s`` the parity of the axis
+    permutation; ``b`` is taken by atan2 too, which keeps its digits near
+    90 degrees. At gimbal lock ``a`` and ``c`` are arbitrary: callers settle them.
+    """
+    i, j, k = ("XYZ".index(a) for a in order)
+    sign = 1.0 if (j - i) % 3 == 1 else -1.0
+    m = matrix
+    b = np.arctan2(sign * m[..., i, k], np.hypot(m[..., i, i], m[..., i, j]))
+    a = np.arctan2(-sign * m[..., j, k], m[..., k, k])
+    c = np.arctan2(-sign * m[..., i, j], m[..., i, i])
+    return np.degrees(np.stack([a, b, c], axis=-1))
+
+
 def quat_to_euler(
     q: np.ndarray, order: str, reference: np.ndarray | None = None
 ) -> np.ndarray:
@@ -197,14 +264,7 @@ def quat_to_euler(
     flat = q.reshape(-1, 4)
     if len(flat) == 0:
         return np.zeros(lead + (3,))
-    from scipy.spatial.transform import Rotation  # imported here: it costs 0.3 s to load
-
-    with warnings.catch_warnings():
-        # At gimbal lock scipy warns and zeroes the third angle; the choice
-        # below (or the caller's exact reference) settles those frames.
-        warnings.simplefilter("ignore", UserWarning)
-        first = Rotation.from_quat(flat).as_euler(order.upper(), degrees=True)
-    first = first.reshape(lead + (3,))
+    first = _euler_from_matrix(quat_to_matrix(q), order.upper())
     locked = np.abs(np.abs(first[..., 1]) - 90.0) < 1e-6
     if np.any(locked):
         # At gimbal lock only a combination of the outer angles is fixed. Take
@@ -238,7 +298,22 @@ def quat_to_euler(
     flip = near_other < near_same
     use_second = np.concatenate([np.zeros((1,) + flip.shape[1:], bool), np.cumsum(flip, axis=0) % 2 == 1])
     chosen = np.where(use_second[..., None], second, first)
-    return np.unwrap(chosen, period=360.0, axis=0)
+    return _unwrap_degrees(chosen)
+
+
+def _unwrap_degrees(angles: np.ndarray) -> np.ndarray:
+    """Add whole turns along axis 0 so no step between neighbours exceeds half a turn.
+
+    ``np.unwrap(angles, period=360, axis=0)`` without its generality: a
+    quarter of the time on whole clips.
+    """
+    step = np.diff(angles, axis=0)
+    turns = np.round(step / 360.0)
+    if not turns.any():
+        return angles
+    out = angles.copy()
+    out[1:] -= 360.0 * np.cumsum(turns, axis=0)
+    return out
 
 
 def _fill_from_unlocked(values: np.ndarray, locked: np.ndarray) -> np.ndarray:

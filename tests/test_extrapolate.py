@@ -94,3 +94,14 @@ def test_bad_omega_is_a_config_error(omega):
 def test_shape_is_checked():
     with pytest.raises(ValueError, match=r"positions must be \(F, J, 3\), got \(120, 31\)"):
         extrapolate(np.zeros((120, 31)), sigma=2.0, omega=2.0)
+
+
+@pytest.mark.parametrize("sigma", [0.6, 3.0, 17.5, 60.0])
+def test_gaussian_average_equals_scipys_filter_on_the_padded_clip(sample_clip, sigma):
+    from scipy.ndimage import gaussian_filter1d
+
+    world = read_bvh(sample_clip)[0].world_positions()
+    radius = int(4.0 * sigma + 0.5)
+    padded = np.pad(world, [(radius, radius), (0, 0), (0, 0)], mode="reflect", reflect_type="odd")
+    expected = gaussian_filter1d(padded, sigma, axis=0, mode="nearest", truncate=4.0)[radius:-radius]
+    np.testing.assert_allclose(gaussian_average(world, sigma), expected, rtol=0, atol=1e-9 * np.abs(world).max())

@@ -374,11 +374,13 @@ def _parse_motion(
     """Frame values ``(F, C)`` from the bytes after ``Frame Time:``."""
     buf = np.frombuffer(block, dtype=np.uint8)
     space = _WHITESPACE[buf]
-    newline = buf == 10
-    line_of_byte = np.cumsum(newline) - newline
-    starts = ~space & np.concatenate([[True], space[:-1]])
-    num_lines = int(line_of_byte[-1]) + 1 if len(buf) else 0
-    counts = np.bincount(line_of_byte[starts], minlength=num_lines)
+    # Where each value starts, and which line that is on: positions, not per-byte arrays.
+    starts = np.flatnonzero(~space[1:] & space[:-1]) + 1
+    if len(buf) and not space[0]:
+        starts = np.concatenate([[0], starts])
+    newlines = np.flatnonzero(buf == 10)
+    num_lines = len(newlines) + 1 if len(buf) else 0
+    counts = np.bincount(np.searchsorted(newlines, starts), minlength=num_lines)
     rows = np.flatnonzero(counts)  # indices of non-empty lines within the block
     report.data_lines = len(rows)
 
@@ -415,7 +417,7 @@ def _parse_motion(
             f"'Frames: {declared}' but {len(rows)} motion lines follow; reading the first {declared}"
         )
 
-    end = int(np.flatnonzero(line_of_byte == used[-1])[-1]) + 1
+    end = int(newlines[used[-1]]) + 1 if used[-1] < len(newlines) else len(buf)
     chunk = block[:end]
     try:
         values = np.array(chunk.split(), dtype=np.float64)

@@ -78,17 +78,33 @@ def gaussian_average(world_pos: np.ndarray, sigma: float, *, axis: int = 0) -> n
     world_pos : (F, ...) float64, time along ``axis``
     sigma : standard deviation in frames; 0 returns a copy
     """
-    from scipy.ndimage import gaussian_filter1d  # imported here: scipy.ndimage takes 0.15 s to load
-
     world_pos = np.asarray(world_pos, dtype=np.float64)
     if sigma <= 0 or world_pos.shape[axis] < 2:
         return world_pos.copy()
     radius = int(4.0 * sigma + 0.5)
-    pad = [(0, 0)] * world_pos.ndim
-    pad[axis] = (radius, radius)
-    padded = np.pad(world_pos, pad, mode="reflect", reflect_type="odd")
-    smooth = gaussian_filter1d(padded, sigma, axis=axis, mode="nearest", truncate=4.0)
-    return np.take(smooth, np.arange(radius, radius + world_pos.shape[axis]), axis=axis)
+    moved = np.moveaxis(world_pos, axis, 0)
+    padded = np.pad(moved, [(radius, radius)] + [(0, 0)] * (moved.ndim - 1), mode="reflect", reflect_type="odd")
+    return np.moveaxis(_convolve_gaussian(padded, sigma, radius), 0, axis)
+
+
+def _convolve_gaussian(padded: np.ndarray, sigma: float, radius: int) -> np.ndarray:
+    """The Gaussian-weighted average of every ``2 radius + 1`` window along axis 0 ("valid" part).
+
+    The same truncated, normalised kernel as ``scipy.ndimage.gaussian_filter1d``
+    (``truncate=4``), applied by FFT: the cost does not grow with sigma, and
+    NumPy's FFT spares the command the 0.25 s import of ``scipy.ndimage``
+    (the tests check the two agree).
+    """
+    taps = np.arange(-radius, radius + 1, dtype=np.float64)
+    kernel = np.exp(-0.5 * (taps / sigma) ** 2)
+    kernel /= kernel.sum()
+    length = padded.shape[0]
+    frames = length - 2 * radius
+    size = 1 << int(np.ceil(np.log2(length + 2 * radius)))
+    flat = padded.reshape(length, -1)
+    spectrum = np.fft.rfft(flat, size, axis=0) * np.fft.rfft(kernel, size)[:, None]
+    smooth = np.fft.irfft(spectrum, size, axis=0)[2 * radius : 2 * radius + frames]
+    return smooth.reshape((frames,) + padded.shape[1:])
 
 
 def extrapolate(

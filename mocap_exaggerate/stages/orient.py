@@ -22,7 +22,7 @@ import numpy as np
 
 from ..kinematics import local_from_world
 from ..motion import Motion
-from ..rotations import cross, quat_between, quat_mul, quat_normalize, quat_rotate, quat_slerp
+from ..rotations import cross, quat_between, quat_from_matrix, quat_mul, quat_normalize, quat_rotate, quat_slerp
 from .subjoints import SubjointHierarchy
 
 __all__ = ["recover_orientations", "motion_from_world"]
@@ -41,8 +41,6 @@ def _triad(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     farthest from it; exact when ``v`` is a rotated ``u``, and a few vector
     operations instead of a per-frame SVD.
     """
-    from scipy.spatial.transform import Rotation
-
     def frame(vectors: np.ndarray, pick: int) -> np.ndarray:
         first = vectors.mean(axis=1)
         first /= np.maximum(np.linalg.norm(first, axis=-1, keepdims=True), 1e-300)
@@ -54,7 +52,7 @@ def _triad(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     mean = u[middle].mean(axis=0)
     pick = int(np.argmax(np.linalg.norm(np.cross(mean, u[middle]), axis=-1)))
     matrix = np.einsum("fij,fkj->fik", frame(v, pick), frame(u, pick))
-    return Rotation.from_matrix(matrix).as_quat()
+    return quat_from_matrix(matrix)
 
 
 def _effective_lengths(skeleton) -> np.ndarray:
