@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -27,8 +28,9 @@ import numpy as np
 
 from .config import DEFAULT_PRESET, PipelineConfig, load_preset
 from .errors import ConfigError, InputError
-from .io.bvh import format_bvh, read_bvh
-from .io.files import OutputExistsError, same_file, write_files
+from .io.bvh import iter_bvh, read_bvh
+from .io.files import OutputExistsError, OutputSet, same_file
+from .outputs import file_digest
 from .limbs import find_limbs
 from .pipeline import PipelineResult, run
 from .skinning import Skin
@@ -196,6 +198,12 @@ def convert(
             raise ConfigError(f"{folder}: exists and is not a folder")
         targets = output_paths(folder, stem, glb=glb, trails=trails)
     check_targets(targets, inputs, overwrite)
+    if glb and not to_stream:
+        from .io.gltf import unit_scale
+
+        unit_scale(units, 1.0)  # a bad unit is refused before anything runs
+        if influences not in (4, 8):
+            raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
 
     from .io.skin import load_skin
     from .io.trails import read_trails
@@ -209,47 +217,54 @@ def convert(
     timings["read"] = time.perf_counter() - started
     result = run(motion, config, paths=paths)
     timings.update(result.timings)
-    tick = time.perf_counter()
-    files: dict[str, bytes] = {"bvh": format_bvh(result.motion)}
-    timings["write"] = time.perf_counter() - tick
-    units_used = None
-    if glb and not to_stream:
-        from .outputs import make_glb
-
-        tick = time.perf_counter()
-        files["glb"], files["weights"], units_used = make_glb(motion, result, skin, units, influences)
-        timings["glb"] = time.perf_counter() - tick
-    if trails is not None:
-        from .io.trails import format_trails
-
-        files["trails"] = format_trails(result.stretch.trails if result.stretch else [], source=label,
-                                        fps=motion.fps)
-
+    input_hash = file_digest(data)
+    del data  # the input's bytes are not needed past this point; a long clip's are tens of MB
     info = None
-    if to_stream:
-        output.write(files.pop("bvh"))
-        if hasattr(output, "flush"):
-            output.flush()
-        write_files([(targets[kind], files[kind]) for kind in files], overwrite=True)
-    else:
-        from .outputs import file_digest, manifest
+    outputs: dict[str, Any] = {}
+    with ThreadPoolExecutor(max_workers=1) as pool, OutputSet(overwrite=True) as written:
+        # The GLB is built while the BVH is formatted and written: both spend most of
+        # their time in NumPy, which lets go of the GIL, so two cores share the work.
+        building = pool.submit(_timed, _make_glb, motion, result, skin, units, influences) \
+            if glb and not to_stream else None
+        tick = time.perf_counter()
+        if to_stream:
+            for piece in iter_bvh(result.motion):
+                output.write(piece)
+            if hasattr(output, "flush"):
+                output.flush()
+        else:
+            outputs["bvh"] = written.add(targets["bvh"], iter_bvh(result.motion))
+        timings["write"] = time.perf_counter() - tick
+        if building is not None:
+            (glb_pieces, weights, units_used), timings["glb"] = building.result()
+            outputs["glb"] = written.add(targets["glb"], glb_pieces)
+            outputs["weights"] = written.add(targets["weights"], weights)
+            del glb_pieces, weights
+        if not to_stream:
+            outputs["pipeline"] = written.add(targets["pipeline"], config.to_toml().encode("utf-8"))
+        if trails is not None:
+            from .io.trails import format_trails
 
-        files["pipeline"] = config.to_toml().encode("utf-8")
-        outputs: dict[str, Any] = {kind: targets[kind].name for kind in files}
-        if "trails" in files:
-            outputs["trails"] = str(targets["trails"])
-        if units_used:
-            outputs["units"] = units_used
-        outputs["hashes"] = {kind: file_digest(files[kind]) for kind in files}
-        timings["total"] = time.perf_counter() - started
-        info = manifest(input_name=label, input_bytes=data, config=config, preset=preset, result=result,
-                        outputs=outputs, reader_warnings=report.warnings, frames_in=motion.num_frames,
-                        fps=motion.fps, timings=timings)
-        files["manifest"] = (json.dumps(info, indent=2) + "\n").encode("utf-8")
-        write_files([(targets[kind], files[kind]) for kind in targets], overwrite=True)
+            outputs["trails"] = written.add(targets["trails"], format_trails(
+                result.stretch.trails if result.stretch else [], source=label, fps=motion.fps))
+        if not to_stream:
+            from .outputs import manifest
+
+            listed: dict[str, Any] = {kind: targets[kind].name for kind in outputs}
+            if "trails" in outputs:
+                listed["trails"] = str(targets["trails"])
+            if building is not None:
+                listed["units"] = units_used
+            listed["hashes"] = outputs.copy()
+            timings["total"] = time.perf_counter() - started
+            info = manifest(input_name=label, input_hash=input_hash, config=config, preset=preset, result=result,
+                            outputs=listed, reader_warnings=report.warnings, frames_in=motion.num_frames,
+                            fps=motion.fps, timings=timings)
+            written.add(targets["manifest"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))
+        written.commit()
     return JobRecord(
         input=label,
-        outputs={kind: path for kind, path in targets.items() if kind in files or kind == "manifest"},
+        outputs={kind: path for kind, path in targets.items() if kind in outputs or kind == "manifest"},
         frames=result.motion.num_frames,
         joints=result.motion.skeleton.num_joints,
         max_link_stretch=result.max_link_stretch,
@@ -259,6 +274,17 @@ def convert(
         manifest=info,
         result=result,
     )
+
+
+def _make_glb(*args):
+    from .outputs import glb_files
+
+    return glb_files(*args)
+
+
+def _timed(func, *args):
+    tick = time.perf_counter()
+    return func(*args), time.perf_counter() - tick
 
 
 def describe(source: Source, *, fps: float | None = None, limbs: bool = False, groups: bool = False,

@@ -13,7 +13,7 @@ import numpy as np
 
 from .rotations import quat_inv, quat_mul, quat_rotate
 
-__all__ = ["forward_kinematics", "local_from_world", "rest_positions"]
+__all__ = ["forward_kinematics", "local_from_world", "rest_positions", "frame_blocks"]
 
 
 def forward_kinematics(
@@ -54,10 +54,17 @@ def local_from_world(
     local_rot[:, 0] = world_rot[:, 0]
     local_pos[:, 0] = world_pos[:, 0]
     if len(parents) > 1:
-        inverse = quat_inv(world_rot[:, parents[1:]])
-        local_rot[:, 1:] = quat_mul(inverse, world_rot[:, 1:])
-        local_pos[:, 1:] = quat_rotate(inverse, world_pos[:, 1:] - world_pos[:, parents[1:]])
+        # In blocks of frames: the same arithmetic, a fraction of the temporaries.
+        for part in frame_blocks(len(world_rot)):
+            inverse = quat_inv(world_rot[part, parents[1:]])
+            local_rot[part, 1:] = quat_mul(inverse, world_rot[part, 1:])
+            local_pos[part, 1:] = quat_rotate(inverse, world_pos[part, 1:] - world_pos[part, parents[1:]])
     return local_rot, local_pos
+
+
+def frame_blocks(frames: int, size: int = 1024):
+    """Slices covering ``range(frames)`` in blocks: per-frame work done block by block keeps memory flat."""
+    return [slice(start, min(start + size, frames)) for start in range(0, frames, size)]
 
 
 def rest_positions(parents: np.ndarray, offsets: np.ndarray) -> np.ndarray:

@@ -19,17 +19,21 @@ from .motion import Motion
 from .pipeline import PipelineResult
 from .skinning import Skin, top_influences
 
-__all__ = ["file_digest", "manifest", "output_thickness", "base_skin", "output_skin", "make_glb"]
+__all__ = ["file_digest", "manifest", "output_thickness", "base_skin", "output_skin", "make_glb", "glb_files"]
 
 
-def file_digest(data: bytes) -> str:
-    return "sha256:" + hashlib.sha256(data).hexdigest()
+def file_digest(data: bytes | list[bytes]) -> str:
+    """``sha256:<hex>`` of bytes, or of a list of pieces taken as one file."""
+    digest = hashlib.sha256()
+    for piece in [data] if isinstance(data, (bytes, bytearray, memoryview)) else data:
+        digest.update(piece)
+    return "sha256:" + digest.hexdigest()
 
 
 def manifest(
     *,
     input_name: str,
-    input_bytes: bytes,
+    input_hash: str,
     config: PipelineConfig,
     preset: str | None,
     result: PipelineResult,
@@ -47,7 +51,7 @@ def manifest(
     info: dict[str, Any] = {
         "tool": "mocap_exaggerate",
         "version": __version__,
-        "input": {"file": input_name, "hash": file_digest(input_bytes), "frames": frames_in, "fps": fps},
+        "input": {"file": input_name, "hash": input_hash, "frames": frames_in, "fps": fps},
         "preset": preset,
         "config": config.to_dict(),
         "stages": list(result.stages),
@@ -153,20 +157,27 @@ def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: 
 
 def make_glb(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
              influences: int = 4) -> tuple[bytes, bytes, str]:
-    """The skinned GLB of a run, its skin as ``.npz`` bytes, and how the units were decided.
+    """The skinned GLB of a run, its skin as ``.npz`` bytes, and how the units were decided."""
+    pieces, weights, how = glb_files(motion, result, skin, units, influences)
+    return b"".join(pieces), weights, how
+
+
+def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
+              influences: int = 4) -> tuple[list[bytes], bytes, str]:
+    """As `make_glb`, with the GLB as a list of pieces (no copy of a long clip's animation into one blob).
 
     motion : the captured clip the run started from
     skin : bound to ``motion``'s joints in its rest pose, or None for the
         default body grown from the skeleton
     """
-    from .io.gltf import format_glb, unit_scale
+    from .io.gltf import glb_pieces, unit_scale
     from .io.skin import npz_bytes
 
     if influences not in (4, 8):
         raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
     scale, how = unit_scale(units, motion.skeleton.height())
     bound = output_skin(motion, result, base_skin(motion, result, skin), influences)
-    glb = format_glb(result.motion, bound, meters_per_unit=scale, thickness=output_thickness(result))
+    glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=output_thickness(result))
     weights = npz_bytes(joint_names=np.array(bound.joint_names), joints=bound.joints, weights=bound.weights,
                         vertices=bound.vertices, faces=bound.faces)
     return glb, weights, how

@@ -264,7 +264,9 @@ def quat_to_euler(
     flat = q.reshape(-1, 4)
     if len(flat) == 0:
         return np.zeros(lead + (3,))
-    first = _euler_from_matrix(quat_to_matrix(q), order.upper())
+    first = np.empty(lead + (3,))
+    for start in range(0, len(q), 1024):  # the (.., 3, 3) matrices are made a block of frames at a time
+        first[start : start + 1024] = _euler_from_matrix(quat_to_matrix(q[start : start + 1024]), order.upper())
     locked = np.abs(np.abs(first[..., 1]) - 90.0) < 1e-6
     if np.any(locked):
         # At gimbal lock only a combination of the outer angles is fixed. Take

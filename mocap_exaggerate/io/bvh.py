@@ -29,7 +29,7 @@ from ..rotations import quat_from_euler, quat_to_euler
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .files import atomic_write
 
-__all__ = ["BVHReport", "read_bvh", "load_bvh", "save_bvh", "format_bvh", "format_fixed", "motion_channels"]
+__all__ = ["BVHReport", "read_bvh", "load_bvh", "save_bvh", "format_bvh", "iter_bvh", "format_fixed", "motion_channels"]
 
 log = logging.getLogger(__name__)
 
@@ -420,10 +420,12 @@ def _parse_motion(
     end = int(newlines[used[-1]]) + 1 if used[-1] < len(newlines) else len(buf)
     chunk = block[:end]
     try:
-        values = np.array(chunk.split(), dtype=np.float64)
+        # C's strtod over the whole block: no Python object per value (a 10,000-frame
+        # clip's million numbers would cost 50 MB as bytes objects).
+        values = np.fromstring(chunk, dtype=np.float64, sep=" ")
     except ValueError:
         values = None
-    if values is None or not np.all(np.isfinite(values)):
+    if values is None or values.size != declared * num_channels or not np.all(np.isfinite(values)):
         _raise_bad_value(chunk, first_line, label)
     return values.reshape(declared, num_channels)
 
@@ -470,6 +472,11 @@ def _motion_from_channels(skeleton: Skeleton, values: np.ndarray, frame_time: fl
 
 def motion_channels(motion: Motion) -> np.ndarray:
     """The motion as BVH channel values ``(F, C)`` in the skeleton's channel layout."""
+    return np.concatenate(list(_channel_blocks(motion, motion.num_frames)) or [np.zeros((motion.num_frames, 0))])
+
+
+def _channel_blocks(motion: Motion, block: int):
+    """BVH channel values ``(n, C)`` for consecutive blocks of ``block`` frames."""
     skeleton = motion.skeleton
     frames = motion.num_frames
     euler = np.zeros((frames, skeleton.num_joints, 3))
@@ -478,20 +485,27 @@ def motion_channels(motion: Motion) -> np.ndarray:
         if any(c in ROTATION_CHANNELS for c in skeleton.channels[j]):
             by_order.setdefault(skeleton.rotation_order(j), []).append(j)
     for order, members in by_order.items():
-        hint = None if motion.euler_hint is None else motion.euler_hint[:, members]
-        euler[:, members] = quat_to_euler(motion.local_rotations[:, members], order, reference=hint)
-    columns = []
+        # Joints are independent: a few at a time keeps the temporaries small on long clips.
+        for start in range(0, len(members), 8):
+            some = members[start : start + 8]
+            hint = None if motion.euler_hint is None else motion.euler_hint[:, some]
+            euler[:, some] = quat_to_euler(motion.local_rotations[:, some], order, reference=hint)
+    # Each column: (0 position / 1 angle, joint, component).
+    source, joint, component = [], [], []
     for j, names in enumerate(skeleton.channels):
         order = skeleton.rotation_order(j)
         for name in names:
-            axis = "XYZ".index(name[0])
-            if name in POSITION_CHANNELS:
-                columns.append(motion.local_positions[:, j, axis])
-            else:
-                columns.append(euler[:, j, order.index(name[0])])
-    if not columns:
-        return np.zeros((frames, 0))
-    return np.stack(columns, axis=1)
+            rotation = name in ROTATION_CHANNELS
+            source.append(int(rotation))
+            joint.append(j)
+            component.append(order.index(name[0]) if rotation else "XYZ".index(name[0]))
+    source, joint, component = np.array(source, bool), np.array(joint, np.int64), np.array(component, np.int64)
+    for start in range(0, frames, block):
+        part = slice(start, min(start + block, frames))
+        values = np.empty((part.stop - part.start, len(source)))
+        values[:, ~source] = motion.local_positions[part][:, joint[~source], component[~source]]
+        values[:, source] = euler[part][:, joint[source], component[source]]
+        yield values
 
 
 def _fmt(value: float) -> str:
@@ -528,7 +542,7 @@ def _format_header(motion: Motion) -> str:
     return out.getvalue()
 
 
-_BLOCK_FRAMES = 2048
+_BLOCK_FRAMES = 1024
 #: Beyond this magnitude micro-units no longer fit float64 exactly; such rows use Python's formatting.
 _FAST_LIMIT = 1e9
 
@@ -597,14 +611,16 @@ _PAIRS = np.array([[48 + i // 10, 48 + i % 10] for i in range(100)], dtype=np.ui
 
 def format_bvh(motion: Motion) -> bytes:
     """The whole file as bytes: fixed-point numbers, LF line ends, tabs."""
-    values = motion_channels(motion)
-    if not np.all(np.isfinite(values)):
+    return b"".join(iter_bvh(motion))
+
+
+def iter_bvh(motion: Motion):
+    """The file as consecutive pieces of bytes (the header, then blocks of frames)."""
+    if not (np.all(np.isfinite(motion.local_positions)) and np.all(np.isfinite(motion.local_rotations))):
         raise ValueError("motion has NaN or infinite values; refusing to write them")
-    header = _format_header(motion).encode("utf-8")
-    parts = [header]
-    for start in range(0, max(len(values), 1), _BLOCK_FRAMES):
-        parts.append(format_fixed(values[start : start + _BLOCK_FRAMES]))
-    return b"".join(parts)
+    yield _format_header(motion).encode("utf-8")
+    for values in _channel_blocks(motion, _BLOCK_FRAMES):
+        yield format_fixed(values)
 
 
 def save_bvh(motion: Motion, path: str | os.PathLike | BinaryIO, *, overwrite: bool = True) -> None:

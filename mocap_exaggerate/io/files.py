@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 from pathlib import Path
 
 from ..errors import MocapError
 
-__all__ = ["OutputExistsError", "atomic_write", "write_files", "same_file"]
+__all__ = ["OutputExistsError", "OutputSet", "atomic_write", "write_files", "same_file"]
 
 
 class OutputExistsError(MocapError, FileExistsError):
@@ -27,20 +28,78 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
         return Path(a).resolve() == Path(b).resolve()
 
 
-def _temporary(path: Path, data: bytes) -> str:
-    folder = path.parent if str(path.parent) else Path(".")
-    folder.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.chmod(tmp, 0o644)
-    except BaseException:
-        _remove(tmp)
-        raise
-    return tmp
+class OutputSet:
+    """Files written as one set: each to a temporary file beside its target, all renamed on `commit`.
+
+    Until the commit the targets are untouched; `abort` (or leaving the
+    ``with`` block by an exception) removes the temporary files, so a failure
+    leaves every folder as it was. Renames happen in the order files were
+    added: add the file that marks the set complete (a manifest) last.
+    A file's data is bytes or an iterable of byte pieces (streamed to disk as
+    they come, so a long clip's text need not be held in memory).
+    """
+
+    def __init__(self, *, overwrite: bool = False) -> None:
+        self.overwrite = overwrite
+        self.pending: list[tuple[str, Path]] = []
+        self.created: list[Path] = []  # folders made for the set, removed again by abort
+
+    def add(self, path: str | os.PathLike, data) -> str:
+        """Write ``data`` to a temporary file for ``path``; its ``sha256:<hex>`` digest."""
+        path = Path(path)
+        if path.exists() and not self.overwrite:
+            raise OutputExistsError(path)
+        digest = hashlib.sha256()
+        folder = path.parent if str(path.parent) else Path(".")
+        try:
+            missing = [f for f in (folder, *folder.parents) if not f.exists()]
+            folder.mkdir(parents=True, exist_ok=True)
+            self.created.extend(reversed(missing))
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+        except OSError as error:
+            raise OSError(error.errno, error.strerror or str(error), str(path)) from None
+        self.pending.append((tmp, path))
+        try:
+            with os.fdopen(fd, "wb") as handle:
+                for piece in [data] if isinstance(data, (bytes, bytearray, memoryview)) else data:
+                    handle.write(piece)
+                    digest.update(piece)
+                handle.flush()
+                os.fsync(handle.fileno())
+            os.chmod(tmp, 0o644)
+        except OSError as error:
+            # Name the file the user asked for, not our temporary one.
+            raise OSError(error.errno, error.strerror or str(error), str(path)) from None
+        return "sha256:" + digest.hexdigest()
+
+    def commit(self) -> None:
+        """Rename every temporary file onto its target, in order."""
+        self.created.clear()
+        while self.pending:
+            tmp, path = self.pending[0]
+            try:
+                os.replace(tmp, path)
+            except OSError as error:
+                raise OSError(error.errno, error.strerror or str(error), str(path)) from None
+            self.pending.pop(0)
+
+    def abort(self) -> None:
+        """Remove the temporary files not yet renamed."""
+        for tmp, _ in self.pending:
+            _remove(tmp)
+        for folder in reversed(self.created):  # only ones we made, and only while empty
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        self.pending.clear()
+        self.created.clear()
+
+    def __enter__(self) -> OutputSet:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.abort()
 
 
 def _remove(path: str) -> None:
@@ -59,30 +118,14 @@ def atomic_write(path: str | os.PathLike, data: bytes, *, overwrite: bool = Fals
     write_files([(Path(path), data)], overwrite=overwrite)
 
 
-def write_files(files: list[tuple[Path, bytes]], *, overwrite: bool = False) -> None:
-    """Write several files as one set: every one to a temporary file first, then all renamed, in order.
-
-    If any write fails (full disk, permissions) nothing is renamed and the
-    temporary files are removed, so the folder keeps what it had. Put the
-    file that marks the set complete (a manifest) last.
-    """
+def write_files(files, *, overwrite: bool = False) -> None:
+    """Write ``(path, data)`` pairs as one `OutputSet`: all of them, or (on any error) none."""
     files = [(Path(path), data) for path, data in files]
     if not overwrite:
         for path, _ in files:
             if path.exists():
                 raise OutputExistsError(path)
-    written: list[tuple[str, Path]] = []
-    path = files[0][0] if files else Path(".")
-    try:
+    with OutputSet(overwrite=True) as output:
         for path, data in files:
-            written.append((_temporary(path, data), path))
-        for number, (tmp, path) in enumerate(written):
-            os.replace(tmp, path)
-            written[number] = ("", path)
-    except OSError as error:
-        # Name the file the user asked for, not our temporary one.
-        raise OSError(error.errno, error.strerror or str(error), str(path)) from None
-    finally:
-        for tmp, _ in written:
-            if tmp:
-                _remove(tmp)
+            output.add(path, data)
+        output.commit()

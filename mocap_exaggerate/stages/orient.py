@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import local_from_world
+from ..kinematics import frame_blocks, local_from_world
 from ..motion import Motion
 from ..rotations import cross, quat_between, quat_from_matrix, quat_mul, quat_normalize, quat_rotate, quat_slerp
 from .subjoints import SubjointHierarchy
@@ -159,6 +159,7 @@ def recover_orientations(
     out[:, original] = world
     between = np.flatnonzero(~hierarchy.is_original)
     if len(between):
-        out[:, between] = quat_slerp(world[:, hierarchy.link_parent[between]], world[:, hierarchy.link_child[between]],
-                                     hierarchy.fraction[between])
+        first, second, fraction = hierarchy.link_parent[between], hierarchy.link_child[between], hierarchy.fraction[between]
+        for part in frame_blocks(frames):
+            out[part, between] = quat_slerp(world[part, first], world[part, second], fraction)
     return out, sub_pos

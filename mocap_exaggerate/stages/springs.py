@@ -154,7 +154,7 @@ def _integrate_vectorised(follow, link_a, link_b, frame_time, substeps, stiffnes
     scatter = np.ascontiguousarray(-(h * link_stiffness / denominator) * incidence.T)
     pull = h * stiffness / denominator
     alpha = ((np.arange(substeps) + 1.0) / substeps)[None, :, None, None]
-    block = max(1, 4096 // substeps)
+    block = max(1, 1024 // substeps)
     for begin in range(0, frames - 1, block):
         stop = min(frames - 1, begin + block)
         step = follow[begin + 1 : stop + 1] - follow[begin:stop]
