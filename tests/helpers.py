@@ -1,10 +1,15 @@
-"""Where the test clips are: the shipped sample clips and the wider real data beside the checkout."""
+"""Shared test helpers: where the test clips are (the shipped samples and the real data beside
+the checkout), the malformed BVH inputs, and skinning a GLB by its own data."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+import pygltflib
 import pytest
+
+from mocap_exaggerate.rotations import quat_rotate
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE_DIR = ROOT / "sample_data"
@@ -34,3 +39,77 @@ def shared(name: str) -> Path:
     if not path.exists():
         pytest.skip(SHARED_REASON)
     return path
+
+
+def make_bvh(body: str, motion: str = "Frames: 2\nFrame Time: 0.1\n0 0 0 0 0 0 0 0 0\n1 2 3 10 20 30 5 6 7\n") -> bytes:
+    return f"HIERARCHY\n{body}MOTION\n{motion}".encode()
+
+
+SIMPLE = """ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Spine
+  {
+    OFFSET 0 1 0
+    CHANNELS 3 Xrotation Yrotation Zrotation
+    End Site
+    {
+      OFFSET 0 1 0
+    }
+  }
+}
+"""
+
+
+MALFORMED = {
+    "empty": (b"", 1, "empty"),
+    "not bvh": (b"{\"json\": true}\n", 1, "HIERARCHY"),
+    "binary": (b"\x00\x01\x02HIERARCHY", 1, "binary"),
+    "no root": (b"HIERARCHY\nJOINT x\n", 2, "ROOT"),
+    "no motion": (make_bvh(SIMPLE, "")[: -len(b"MOTION\n")], 15, "MOTION"),
+    "unknown channel": (make_bvh(SIMPLE.replace("Zrotation Xrotation", "Wrotation Xrotation")), 5, "Wrotation"),
+    "channel count too big": (make_bvh(SIMPLE.replace("CHANNELS 3", "CHANNELS 4")), 9, "CHANNELS"),
+    "channel count not a number": (make_bvh(SIMPLE.replace("CHANNELS 3", "CHANNELS three")), 9, "three"),
+    "offset not a number": (make_bvh(SIMPLE.replace("OFFSET 0 1 0\n    CHANNELS", "OFFSET 0 x 0\n    CHANNELS")), 8, "OFFSET"),
+    "missing brace": (make_bvh(SIMPLE.replace("  JOINT Spine\n  {", "  JOINT Spine\n")), 8, "{"),
+    "unbalanced": (make_bvh(SIMPLE + "}\n"), 16, "unbalanced"),
+    "two roots": (make_bvh(SIMPLE + SIMPLE), 16, "ROOT"),
+    "duplicate name": (make_bvh(SIMPLE.replace("JOINT Spine", "JOINT Hips")), 6, "twice"),
+    "frames missing": (make_bvh(SIMPLE, "Frame Time: 0.1\n1 2 3 4 5 6 7 8 9\n"), 17, "Frames"),
+    "frames not number": (make_bvh(SIMPLE, "Frames: many\nFrame Time: 0.1\n"), 17, "many"),
+    "zero frames": (make_bvh(SIMPLE, "Frames: 0\nFrame Time: 0.1\n"), 17, "no frames"),
+    "negative frame time": (make_bvh(SIMPLE, "Frames: 1\nFrame Time: -0.1\n1 2 3 4 5 6 7 8 9\n"), 18, "frame time"),
+    "frame time missing": (make_bvh(SIMPLE, "Frames: 1\n1 2 3 4 5 6 7 8 9\n"), 18, "Frame Time"),
+    "too few lines": (make_bvh(SIMPLE, "Frames: 3\nFrame Time: 0.1\n1 2 3 4 5 6 7 8 9\n1 2 3 4 5 6 7 8 9\n"), 20, "only 2 complete"),
+    "truncated line": (make_bvh(SIMPLE, "Frames: 2\nFrame Time: 0.1\n1 2 3 4 5 6 7 8 9\n1 2 3 4 5\n"), 20, "truncated"),
+    "short line inside": (make_bvh(SIMPLE, "Frames: 2\nFrame Time: 0.1\n1 2 3 4\n1 2 3 4 5 6 7 8 9\n"), 19, "4 values"),
+    "bad number": (make_bvh(SIMPLE, "Frames: 2\nFrame Time: 0.1\n1 2 3 4 5 6 7 8 9\n1 2 3 4 five 6 7 8 9\n"), 20, "five"),
+    "nan value": (make_bvh(SIMPLE, "Frames: 1\nFrame Time: 0.1\n1 2 nan 4 5 6 7 8 9\n"), 19, "nan"),
+    "end site without offset": (make_bvh(SIMPLE.replace("      OFFSET 0 1 0\n    }", "    }")), 12, "OFFSET"),
+    "joint without offset": (make_bvh(SIMPLE.replace("    OFFSET 0 1 0\n    CHANNELS 3", "    CHANNELS 3")), 13, "OFFSET"),
+}
+
+
+def skinned_vertices(glb: bytes, frame: int, result, meters: float):
+    """Linear blend skinning of the GLB's own mesh, weights and bind matrices with the run's
+    world transforms at ``frame`` (in metres)."""
+    gltf = pygltflib.GLTF2.load_from_bytes(glb)
+    blob = gltf.binary_blob()
+
+    def read(index, dtype, width):
+        accessor = gltf.accessors[index]
+        view = gltf.bufferViews[accessor.bufferView]
+        data = np.frombuffer(blob, dtype=dtype, count=accessor.count * width, offset=view.byteOffset)
+        return data.reshape(accessor.count, width)
+
+    primitive = gltf.meshes[0].primitives[0]
+    positions = read(primitive.attributes.POSITION, np.float32, 3).astype(np.float64)
+    small = gltf.accessors[primitive.attributes.JOINTS_0].componentType == pygltflib.UNSIGNED_BYTE
+    joints = read(primitive.attributes.JOINTS_0, np.uint8 if small else np.uint16, 4).astype(np.int64)
+    weights = read(primitive.attributes.WEIGHTS_0, np.float32, 4).astype(np.float64)
+    ibm = read(gltf.skins[0].inverseBindMatrices, np.float32, 16).reshape(-1, 4, 4).transpose(0, 2, 1)
+    # Bind matrices are pure translations: v' = sum_j w_j (R_j (v + t_j) + p_j).
+    local = positions[:, None, :] + ibm[joints, :3, 3]
+    moved = quat_rotate(result.world_rotations[frame][joints], local) + result.world_positions[frame][joints] * meters
+    return np.sum(weights[..., None] * moved, axis=1), weights

@@ -73,7 +73,7 @@ def test_blender_imports_the_glb_and_deforms_the_mesh_as_we_do(clip, tmp_path):
     from mocap_exaggerate.io.gltf import unit_scale
     from mocap_exaggerate.outputs import make_glb
 
-    from .test_gltf import skinned_vertices
+    from .helpers import skinned_vertices
 
     motion, _ = read_bvh(SAMPLE_DIR / clip)
     result = run(motion, load_preset("cartoon"))

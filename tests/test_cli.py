@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from mocap_exaggerate_cli.main import cli
 from mocap_exaggerate.io.bvh import read_bvh
 
-from .test_bvh import MALFORMED
+from .helpers import MALFORMED
 
 
 @pytest.fixture

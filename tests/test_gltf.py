@@ -27,7 +27,7 @@ from mocap_exaggerate.body import default_skin
 from mocap_exaggerate.skinning import reweight, segment_distance, subjoint_bind_positions
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 
-from .helpers import ROOT, SHARED_BVH, all_clip_params, shared
+from .helpers import ROOT, SHARED_BVH, all_clip_params, shared, skinned_vertices
 
 VALIDATOR = Path(__file__).parent / "gltf" / "validate.mjs"
 HAS_VALIDATOR = shutil.which("node") is not None and (Path(__file__).parent / "gltf" / "node_modules" / "gltf-validator").exists()
@@ -73,30 +73,6 @@ def test_validator_on_the_original_skeleton_and_a_given_skin(sample_clip, tmp_pa
     glb, _, _ = make_glb(motion, result, load_skin(skin_file), "cm")
     report = validate(glb, tmp_path)
     assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0
-
-
-def skinned_vertices(glb: bytes, frame: int, result, meters: float):
-    """Linear blend skinning of the GLB's own mesh, weights and bind matrices with the run's
-    world transforms at ``frame`` (in metres)."""
-    gltf = pygltflib.GLTF2.load_from_bytes(glb)
-    blob = gltf.binary_blob()
-
-    def read(index, dtype, width):
-        accessor = gltf.accessors[index]
-        view = gltf.bufferViews[accessor.bufferView]
-        data = np.frombuffer(blob, dtype=dtype, count=accessor.count * width, offset=view.byteOffset)
-        return data.reshape(accessor.count, width)
-
-    primitive = gltf.meshes[0].primitives[0]
-    positions = read(primitive.attributes.POSITION, np.float32, 3).astype(np.float64)
-    small = gltf.accessors[primitive.attributes.JOINTS_0].componentType == pygltflib.UNSIGNED_BYTE
-    joints = read(primitive.attributes.JOINTS_0, np.uint8 if small else np.uint16, 4).astype(np.int64)
-    weights = read(primitive.attributes.WEIGHTS_0, np.float32, 4).astype(np.float64)
-    ibm = read(gltf.skins[0].inverseBindMatrices, np.float32, 16).reshape(-1, 4, 4).transpose(0, 2, 1)
-    # Bind matrices are pure translations: v' = sum_j w_j (R_j (v + t_j) + p_j).
-    local = positions[:, None, :] + ibm[joints, :3, 3]
-    moved = quat_rotate(result.world_rotations[frame][joints], local) + result.world_positions[frame][joints] * meters
-    return np.sum(weights[..., None] * moved, axis=1), weights
 
 
 @pytest.mark.parametrize("clip", ["cmu_09_01_run_daz.bvh", "mocapbank_sit_down_stand_up.bvh"])

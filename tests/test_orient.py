@@ -11,10 +11,10 @@ from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.rotations import quat_angle, quat_between, quat_rotate, quat_slerp
 from mocap_exaggerate.stages.orient import _triad
 
-rng = np.random.default_rng(11)
 
 
 def test_quat_between_is_the_smallest_rotation():
+    rng = np.random.default_rng(1101)
     u = rng.normal(size=(200, 3))
     v = rng.normal(size=(200, 3)) * 3.0
     q = quat_between(u, v)
@@ -44,6 +44,7 @@ def test_slerp_endpoints_and_midpoint():
 
 
 def test_triad_recovers_a_known_rotation():
+    rng = np.random.default_rng(1102)
     truth = Rotation.random(30, random_state=3)
     u = np.repeat(rng.normal(size=(1, 3, 3)), 30, axis=0)
     v = np.stack([truth[i].apply(u[i]) for i in range(30)])

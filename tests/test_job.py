@@ -1,0 +1,170 @@
+"""The whole job from Python: `convert` writes a complete set or nothing, from paths, bytes or streams."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mocap_exaggerate import convert
+from mocap_exaggerate.config import load_preset, resolve_config
+from mocap_exaggerate.errors import ConfigError, InputError
+from mocap_exaggerate.io.bvh import read_bvh
+from mocap_exaggerate.io.files import OutputExistsError, OutputSet, write_files
+from mocap_exaggerate.pipeline import STAGES, Stage, run
+
+FAST = resolve_config("cartoon", None, {"subjoints": {"per_link": 2}})
+
+
+def snapshot(folder):
+    """Every file below ``folder`` with its bytes (and nothing for a folder that is not there)."""
+    if not folder.exists():
+        return None
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_convert_writes_the_set_and_returns_what_it_did(sample_clip, tmp_path):
+    record = convert(sample_clip, tmp_path / "out", FAST, preset="cartoon")
+    names = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert names == ["cmu_09_01_run_daz.bvh", "cmu_09_01_run_daz.glb", "cmu_09_01_run_daz.json",
+                     "cmu_09_01_run_daz.pipeline.toml", "cmu_09_01_run_daz.weights.npz"]
+    assert set(record.outputs) == {"bvh", "glb", "weights", "pipeline", "manifest"}
+    assert all(path.exists() for path in record.outputs.values())
+    written = read_bvh(record.outputs["bvh"])[0]
+    assert record.frames == written.num_frames == 149 and record.joints == written.skeleton.num_joints
+    assert record.max_link_stretch >= 1.0 and record.seconds > 0 and record.input == str(sample_clip)
+    assert any("rest-pose frame" in note for note in record.notes)
+    # The manifest is written last and names the hash of every other file of the set.
+    manifest = json.loads(record.outputs["manifest"].read_text())
+    assert manifest == json.loads(json.dumps(record.manifest))
+    for kind, digest in manifest["outputs"]["hashes"].items():
+        assert digest == "sha256:" + hashlib.sha256(record.outputs[kind].read_bytes()).hexdigest(), kind
+    assert manifest["input"]["hash"] == "sha256:" + hashlib.sha256(sample_clip.read_bytes()).hexdigest()
+
+
+def test_the_written_pipeline_file_rebuilds_the_same_output(sample_clip, tmp_path):
+    config = resolve_config("looney", None, {"extrapolate": {"omega": 3.5, "weights": {"left_arm": 2.0}}})
+    first = convert(sample_clip, tmp_path / "a", config, glb=False)
+    again = resolve_config(None, first.outputs["pipeline"].read_text(), None)
+    assert again == config
+    second = convert(sample_clip, tmp_path / "b", again, glb=False)
+    assert first.outputs["bvh"].read_bytes() == second.outputs["bvh"].read_bytes()
+
+
+def test_bytes_and_streams_in_and_out(sample_clip, tmp_path):
+    data = sample_clip.read_bytes()
+    from_path = convert(sample_clip, tmp_path / "p", FAST, glb=False)
+    from_bytes = convert(data, tmp_path / "b", FAST, glb=False, name="take")
+    assert from_bytes.outputs["bvh"].name == "take.bvh" and from_bytes.input == "<bytes>"
+    assert from_bytes.outputs["bvh"].read_bytes() == from_path.outputs["bvh"].read_bytes()
+    stream = io.BytesIO(data)
+    out = io.BytesIO()
+    record = convert(stream, out, FAST)  # a stream gets the BVH alone: no manifest, no GLB
+    assert out.getvalue() == from_path.outputs["bvh"].read_bytes()
+    assert record.manifest is None and record.outputs == {}
+
+
+@pytest.mark.parametrize("case", ["exists", "trails exists", "input folder", "a folder in the way", "bad units",
+                                  "bad name", "bad path file", "bad skin"])
+def test_a_refusal_writes_nothing(sample_clip, tmp_path, case):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("untouched")
+    kwargs = {}
+    source = sample_clip
+    if case == "exists":
+        (out / "cmu_09_01_run_daz.glb").write_bytes(b"old")
+        kwargs = {"trails": tmp_path / "out" / "trails.json"}  # once written even when the run was refused
+        error = OutputExistsError
+    elif case == "trails exists":
+        (out / "trails.json").write_bytes(b"old")
+        kwargs = {"trails": out / "trails.json"}
+        error = OutputExistsError
+    elif case == "input folder":
+        source = out / "clip.bvh"
+        source.write_bytes(sample_clip.read_bytes())
+        kwargs = {"overwrite": True, "name": "clip"}  # even with overwrite, never over the input
+        error = ConfigError
+    elif case == "a folder in the way":
+        (out / "cmu_09_01_run_daz.json").mkdir()
+        kwargs = {"overwrite": True}
+        error = ConfigError
+    elif case == "bad units":
+        kwargs = {"units": "furlong"}
+        error = ConfigError
+    elif case == "bad name":
+        kwargs = {"name": "../escape"}
+        error = ConfigError
+    elif case == "bad path file":
+        (tmp_path / "edit.json").write_text('{"trails": 5}')
+        kwargs = {"path_file": tmp_path / "edit.json"}
+        error = InputError
+    else:
+        kwargs = {"skin": tmp_path / "none.npz"}
+        error = InputError
+    before = snapshot(tmp_path)
+    with pytest.raises(error):
+        convert(source, out, FAST, **kwargs)
+    assert snapshot(tmp_path) == before
+
+
+def test_a_missing_output_folder_is_not_left_behind_by_a_refusal(sample_clip, tmp_path):
+    with pytest.raises(ConfigError):
+        convert(sample_clip, tmp_path / "new" / "deeper", FAST, units="furlong")
+    assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.parametrize("name", ["../x", "/abs/x", "a/b", "a\\b", ".hidden", "", "x" * 250, "tab\there"])
+def test_names_are_plain_file_names(sample_clip, tmp_path, name):
+    with pytest.raises(ConfigError, match="name"):
+        convert(sample_clip, tmp_path / "out", FAST, name=name)
+    assert not (tmp_path / "out").exists() and sorted(tmp_path.iterdir()) == []
+
+
+def test_a_failed_set_leaves_no_file_and_no_temporary(tmp_path):
+    (tmp_path / "second.bin").mkdir()  # renaming a file onto a folder fails
+    with pytest.raises(OSError) as caught:
+        write_files([(tmp_path / "first.bin", b"1"), (tmp_path / "second.bin", [b"2", b"2"]),
+                     (tmp_path / "third.bin", b"3")], overwrite=True)
+    assert caught.value.filename == str(tmp_path / "second.bin")  # the target, not our temporary name
+    assert sorted(p.name for p in tmp_path.iterdir()) in (["second.bin"], ["first.bin", "second.bin"])
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_an_output_set_is_renamed_only_on_commit(tmp_path):
+    with OutputSet() as written:
+        digest = written.add(tmp_path / "a" / "x.bin", [b"ab", b"c"])
+        assert digest == "sha256:" + hashlib.sha256(b"abc").hexdigest()
+        assert not (tmp_path / "a" / "x.bin").exists()
+    assert not (tmp_path / "a").exists()  # aborted: the folder it made is gone too
+    with OutputSet() as written:
+        written.add(tmp_path / "x.bin", b"abc")
+        written.commit()
+    assert (tmp_path / "x.bin").read_bytes() == b"abc" and not list(tmp_path.glob(".*.tmp"))
+
+
+def test_a_stage_added_to_the_declared_list_runs_in_its_place(sample_clip):
+    motion, _ = read_bvh(sample_clip)
+    config = replace(FAST, springs=replace(FAST.springs, enabled=False))
+
+    def lift(state, height):
+        positions = state.positions.copy()
+        positions[..., 1] += height
+        return replace(state, positions=positions)
+
+    stages = STAGES[:3] + (Stage("lift", lift, lambda c: 10.0),) + STAGES[3:]
+    plain = run(motion, config)
+    lifted = run(motion, config, stages=stages)
+    assert lifted.stages == ["extrapolate", "correct", "lift", "subjoints", "orient"]
+    assert plain.stages == ["extrapolate", "correct", "subjoints", "orient"]
+    moved = lifted.world_positions - plain.world_positions
+    np.testing.assert_allclose(moved[..., 1], 10.0, atol=1e-6)
+    np.testing.assert_allclose(moved[..., [0, 2]], 0.0, atol=1e-6)
+    switched_off = (Stage("lift", lift, lambda c: None),)
+    assert run(motion, config, stages=STAGES[:3] + switched_off + STAGES[3:]).stages == plain.stages
+    with pytest.raises(ValueError, match="orient"):
+        run(motion, config, stages=STAGES[:-1])
