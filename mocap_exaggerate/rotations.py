@@ -167,15 +167,33 @@ def quat_from_euler(euler: np.ndarray, order: str) -> np.ndarray:
 
     euler : (..., 3) float64, the i-th angle about ``order[i]``
 
-    Composed from three axis quaternions, ``q = q0 * q1 * q2``; this is the
-    same rotation as ``Rotation.from_euler(order, euler, degrees=True)`` but
-    about eight times faster on whole clips.
+    The same rotation as ``Rotation.from_euler(order, euler, degrees=True)``
+    and as ``q0 * q1 * q2`` of the three axis quaternions. For the six
+    Tait-Bryan orders (three different axes, every BVH order) the product is
+    written out: with half-angle cosines ``c`` and sines ``s`` and ``p`` the
+    parity of the axis permutation (+1 when ``ijk`` is cyclic),
+    ``q_i = s1 c2 c3 + p c1 s2 s3``, ``q_j = c1 s2 c3 - p s1 c2 s3``,
+    ``q_k = c1 c2 s3 + p s1 s2 c3``, ``w = c1 c2 c3 - p s1 s2 s3``.
     """
-    radians = np.deg2rad(np.asarray(euler, dtype=np.float64))
     order = order.upper()
-    q = quat_from_axis_angle(order[0], radians[..., 0])
-    q = quat_mul(q, quat_from_axis_angle(order[1], radians[..., 1]))
-    return quat_mul(q, quat_from_axis_angle(order[2], radians[..., 2]))
+    radians = np.deg2rad(np.asarray(euler, dtype=np.float64))
+    if len(set(order)) != 3:
+        q = quat_from_axis_angle(order[0], radians[..., 0])
+        q = quat_mul(q, quat_from_axis_angle(order[1], radians[..., 1]))
+        return quat_mul(q, quat_from_axis_angle(order[2], radians[..., 2]))
+    i, j, k = ("XYZ".index(a) for a in order)
+    parity = 1.0 if (j - i) % 3 == 1 else -1.0
+    half = 0.5 * radians
+    c, s = np.cos(half), np.sin(half)
+    c1, c2, c3 = c[..., 0], c[..., 1], c[..., 2]
+    s1, s2, s3 = s[..., 0], s[..., 1], s[..., 2]
+    c1c2, s1s2, c1s2, s1c2 = c1 * c2, s1 * s2, c1 * s2, s1 * c2
+    out = np.empty(radians.shape[:-1] + (4,))
+    out[..., i] = s1c2 * c3 + parity * c1s2 * s3
+    out[..., j] = c1s2 * c3 - parity * s1c2 * s3
+    out[..., k] = c1c2 * s3 + parity * s1s2 * c3
+    out[..., 3] = c1c2 * c3 - parity * s1s2 * s3
+    return out
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:

@@ -291,3 +291,44 @@ def test_tiny_skeletons_and_single_frames_run_end_to_end(runner, tmp_path, name,
     assert motion.num_frames == frames and np.all(np.isfinite(motion.world_positions()))
     assert (tmp_path / "out" / "tiny.glb").stat().st_size > 1000
     assert runner.invoke(cli, ["preview", str(clip), "-o", str(tmp_path / "p.png")]).exit_code == 0
+
+
+# ---------------------------------------------------------------------------- as users run it: a real process
+
+
+def command(*args, **kwargs):
+    """``mocap-exaggerate ARGS`` in a new process (the installed module, as the console script runs it)."""
+    import subprocess
+    import sys
+
+    kwargs.setdefault("stdout", subprocess.PIPE)
+    return subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", *map(str, args)],
+                          stderr=subprocess.PIPE, text=True, timeout=120, **kwargs)
+
+
+def test_verbosity_may_follow_the_subcommand(sample_clip, tmp_path):
+    loud = command("exaggerate", sample_clip, "-o", tmp_path / "a", "--no-glb", "-v")
+    assert loud.returncode == 0, loud.stderr
+    assert "INFO" in loud.stderr and "rest-pose frame" in loud.stderr and "Traceback" not in loud.stderr
+    quiet = command("exaggerate", sample_clip, "-o", tmp_path / "b", "--no-glb", "-q")
+    assert quiet.returncode == 0 and quiet.stderr == ""
+    before = command("-v", "info", sample_clip)
+    assert before.returncode == 0 and "joints" in before.stdout
+
+
+def test_a_reader_that_goes_away_gets_no_error_message(sample_clip):
+    import os
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # like `| head` having exited: every write fails with EPIPE
+    try:
+        done = command("info", sample_clip, "--limbs", "--groups", stdout=write_end)
+    finally:
+        os.close(write_end)
+    assert "Broken pipe" not in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
+def test_help_and_version_answer(tmp_path):
+    done = command("--help")
+    assert done.returncode == 0 and "exaggerate" in done.stdout
+    assert command("--version").stdout.strip().endswith("0.1.0")
