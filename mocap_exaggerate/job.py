@@ -53,6 +53,7 @@ class JobRecord:
     frames, joints : of the output motion
     max_link_stretch : largest link length over its rest length, after the stretch pass
     seconds : wall time of the whole job
+    timings : seconds per step (read, each stage, write, glb), as in the manifest
     warnings : what the reader noticed in the input (extra lines, a frame rate overridden)
     notes : what the pipeline did that the user should hear about (rest frames, stretches found)
     manifest : the manifest as written (None when the BVH went to a stream)
@@ -65,6 +66,7 @@ class JobRecord:
     joints: int
     max_link_stretch: float
     seconds: float
+    timings: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     manifest: dict[str, Any] | None = None
@@ -269,6 +271,7 @@ def convert(
         joints=result.motion.skeleton.num_joints,
         max_link_stretch=result.max_link_stretch,
         seconds=time.perf_counter() - started,
+        timings=timings,
         warnings=list(report.warnings),
         notes=list(result.notes),
         manifest=info,

@@ -235,3 +235,14 @@ def load_skin_bytes(glb: bytes, folder: Path):
     path = folder / "back.glb"
     path.write_bytes(glb)
     return load_skin(path)
+
+
+def test_vertex_normals_are_trimeshs(sample_clip):
+    from mocap_exaggerate.io.gltf import vertex_normals
+
+    skin = default_skin(read_bvh(sample_clip)[0].skeleton)
+    expected = trimesh.Trimesh(skin.vertices, skin.faces, process=False).vertex_normals
+    np.testing.assert_allclose(vertex_normals(skin.vertices, skin.faces), expected, atol=1e-9)
+    # A vertex on no face still gets a unit normal (the validator checks them).
+    lonely = vertex_normals(np.vstack([skin.vertices, [[0.0, 0.0, 0.0]]]), skin.faces)
+    np.testing.assert_allclose(np.linalg.norm(lonely, axis=1), 1.0)

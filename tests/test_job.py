@@ -37,6 +37,7 @@ def test_convert_writes_the_set_and_returns_what_it_did(sample_clip, tmp_path):
     written = read_bvh(record.outputs["bvh"])[0]
     assert record.frames == written.num_frames == 149 and record.joints == written.skeleton.num_joints
     assert record.max_link_stretch >= 1.0 and record.seconds > 0 and record.input == str(sample_clip)
+    assert {"read", "extrapolate", "springs", "orient", "write", "glb"} <= set(record.timings)
     assert any("rest-pose frame" in note for note in record.notes)
     # The manifest is written last and names the hash of every other file of the set.
     manifest = json.loads(record.outputs["manifest"].read_text())

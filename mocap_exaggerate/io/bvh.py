@@ -137,7 +137,7 @@ def read_bvh(
                 raise InputError(f"frame time {m.group(1)!r} is not a number", source=label, line=line_no) from None
             if not (np.isfinite(frame_time) and frame_time > 0) and fps is None:
                 raise InputError(
-                    f"frame time {m.group(1)} is not a positive number of seconds (pass --fps to set the rate)",
+                    f"frame time {m.group(1)} is not a positive number of seconds (give the frame rate, fps, to read it)",
                     source=label,
                     line=line_no,
                 )
@@ -152,7 +152,7 @@ def read_bvh(
 
     if fps is not None:
         if not (np.isfinite(fps) and fps > 0):
-            raise InputError(f"--fps must be positive, got {fps}", source=label)
+            raise InputError(f"fps must be a positive number, got {fps}", source=label)
         if report.header_fps and abs(report.header_fps - fps) > 1e-6 * fps:
             report.warnings.append(f"frame rate set to {fps:g} fps (header says {report.header_fps:g})")
         frame_time = 1.0 / fps

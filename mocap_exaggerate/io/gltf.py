@@ -42,7 +42,7 @@ def unit_scale(units: str, height: float) -> tuple[float, str]:
         return 0.01, "cm (guessed from the skeleton's height)"
     if height <= 3:
         return 1.0, "m (guessed from the skeleton's height)"
-    return 1.7 / height, "scaled to a 1.7 m figure (height between 3 and 50 units; pass --units)"
+    return 1.7 / height, "scaled to a 1.7 m figure (height between 3 and 50 units; give the units to say what they are)"
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -163,25 +163,25 @@ def parse_stretch(text: str) -> StretchSpec:
     """
     match = _SPEC.match(text)
     if not match:
-        raise ConfigError(f"--stretch {text!r}: expected LIMB:START-END:SCALE[:key=value...], e.g. left_arm:120-160:3")
+        raise ConfigError(f"stretch spec {text!r}: expected LIMB:START-END:SCALE[:key=value...], e.g. left_arm:120-160:3")
     limb, start, end, scale, rest = match.groups()
     options: dict = {}
     for item in filter(None, rest.split(":")):
         key, sep, value = item.partition("=")
         key = key.strip()
         if not sep:
-            raise ConfigError(f"--stretch {text!r}: {item!r} is not key=value")
+            raise ConfigError(f"stretch spec {text!r}: {item!r} is not key=value")
         if key in ("ease_in", "ease_out"):
             parts = value.split(",")
             if len(parts) != 2:
-                raise ConfigError(f"--stretch {text!r}: {key} takes percent,value (e.g. {key}=0.6,0.2)")
+                raise ConfigError(f"stretch spec {text!r}: {key} takes percent,value (e.g. {key}=0.6,0.2)")
             options[key] = tuple(_number(p, text, key) for p in parts)
         elif key in ("blend",):
             options[key] = _number(value, text, key)
         elif key in ("axes", "pivot", "release"):
             options[key] = value.strip()
         else:
-            raise ConfigError(f"--stretch {text!r}: unknown key {key!r} (axes, pivot, blend, ease_in, ease_out, release)")
+            raise ConfigError(f"stretch spec {text!r}: unknown key {key!r} (axes, pivot, blend, ease_in, ease_out, release)")
     return StretchSpec(limb=limb, start=start, end=end, scale=_number(scale, text, "scale"), **options)
 
 
@@ -190,7 +190,7 @@ def _number(text: str, spec: str, key: str) -> float:
     try:
         return float(text[:-1]) / 100.0 if text.endswith("%") else float(text)
     except ValueError:
-        raise ConfigError(f"--stretch {spec!r}: {key} {text!r} is not a number") from None
+        raise ConfigError(f"stretch spec {spec!r}: {key} {text!r} is not a number") from None
 
 
 def ease_curve(ease_in: tuple[float, float] | None = None, ease_out: tuple[float, float] | None = None):
