@@ -289,8 +289,8 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
         log.info("%s: %s", record.input, note)
     if record.manifest is not None and not _quiet():
         written = record.outputs
-        extras = ", ".join(p.suffix if k != "weights" else ".weights.npz" for k, p in written.items()
-                           if k in ("glb", "weights"))
+        suffixes = {"glb": ".glb", "weights": ".weights.npz", "pipeline": ".pipeline.toml"}
+        extras = ", ".join(suffixes[k] for k in written if k in suffixes)
         click.echo(
             f"wrote {written['bvh']}{', ' + extras if extras else ''} and {written['manifest'].name}: "
             f"{record.frames} frames, {record.joints} joints, max link stretch {record.max_link_stretch:.2f}x, "
