@@ -18,7 +18,7 @@ import click
 
 # Only light modules at import time: `--help` must not wait for SciPy, trimesh or pygltflib.
 from mocap_exaggerate import __version__
-from mocap_exaggerate.config import DEFAULT_PRESET, preset_description, preset_names, resolve_config
+from mocap_exaggerate.config import DEFAULT_PRESET, preset_description, preset_names, read_config_text, resolve_config
 from mocap_exaggerate.errors import MocapError
 from mocap_exaggerate.io.files import OutputExistsError
 from mocap_exaggerate.stages.stretch import parse_stretch
@@ -174,12 +174,7 @@ def _length(value: str | None) -> float | str | None:
 
 
 def _config_from_options(p: dict[str, Any]):
-    text = None
-    if p["config_file"] is not None:
-        try:
-            text = p["config_file"].read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise UserError(f"{p['config_file']}: no such config file") from None
+    text = read_config_text(p["config_file"]) if p["config_file"] is not None else None
     preset = p["preset"] or DEFAULT_PRESET
     config = resolve_config(preset, text, _overrides(p), config_source=str(p["config_file"] or "options"))
     if p["stretches"]:

@@ -52,10 +52,16 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     faces = np.asarray(mesh.tri_verts, dtype=np.int64)
     # Weights: inverse fourth power of the distance to the nearest four links, each link
     # moving with its head joint (an End Site's link with the joint itself).
-    distance = segment_distance(vertices[:, None, :], points[heads][None], points[tails][None])
-    distance = np.maximum(distance - radii[None] * 0.5, 1e-3 * height)
-    nearest = np.argsort(distance, axis=1)[:, :4]
-    strength = 1.0 / np.take_along_axis(distance, nearest, axis=1) ** 4
+    count = min(4, len(heads))
+    nearest = np.empty((len(vertices), count), dtype=np.int64)
+    strength = np.empty((len(vertices), count))
+    block = max(1, 2_000_000 // len(heads))  # vertices x links per block: memory stays flat on big rigs
+    for start in range(0, len(vertices), block):
+        part = slice(start, start + block)
+        distance = segment_distance(vertices[part, None, :], points[heads][None], points[tails][None])
+        distance = np.maximum(distance - radii[None] * 0.5, 1e-3 * height)
+        nearest[part] = np.argsort(distance, axis=1, kind="stable")[:, :count]
+        strength[part] = 1.0 / np.take_along_axis(distance, nearest[part], axis=1) ** 4
     rows = np.repeat(np.arange(len(vertices)), nearest.shape[1])
     joints, weights = top_influences(rows, heads[nearest].ravel(), strength.ravel(), len(vertices), 4)
     return Skin(vertices, faces, skeleton.names, joints, weights)

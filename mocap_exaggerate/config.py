@@ -9,12 +9,15 @@ resolving one: shipped preset < config file < explicit overrides.
 from __future__ import annotations
 
 import copy
+import os
 import tomllib
 from dataclasses import asdict, dataclass, field, fields
 from importlib import resources
+from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError, check_number
+from .io.bvh import FPS_RANGE
 from .stages.correct import CorrectConfig
 from .stages.extrapolate import ExtrapolateConfig
 from .stages.springs import SpringConfig
@@ -30,6 +33,7 @@ __all__ = [
     "load_preset",
     "preset_description",
     "resolve_config",
+    "read_config_text",
 ]
 
 DEFAULT_PRESET = "cartoon"
@@ -54,7 +58,7 @@ class InputConfig:
         if self.tpose not in _TPOSE_MODES:
             raise ConfigError(f"input.tpose must be one of {', '.join(_TPOSE_MODES)}, got {self.tpose!r}")
         if self.fps is not None:
-            check_number("input.fps", self.fps, 0, 10000, low_open=True)
+            check_number("input.fps", self.fps, *FPS_RANGE)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -169,17 +173,38 @@ class PipelineConfig:
 
     @classmethod
     def from_toml(cls, text: str, *, source: str = "config") -> PipelineConfig:
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as error:
-            raise ConfigError(f"{source}: not valid TOML: {error}") from None
-        return cls.from_dict(data, source=source)
+        return cls.from_dict(_parse_toml(text, source), source=source)
 
     def to_toml(self) -> str:
         """The declaration as TOML text; `from_toml` of it gives an equal config."""
         import tomli_w
 
         return tomli_w.dumps(self.to_dict())
+
+
+def _parse_toml(text: str, source: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{source}: not valid TOML: {error}") from None
+    except RecursionError:
+        raise ConfigError(f"{source}: not valid TOML: nested too deeply") from None
+
+
+def read_config_text(path: str | os.PathLike) -> str:
+    """The text of a pipeline file; ConfigError naming the file when it cannot be read as UTF-8 text."""
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such config file") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a folder, not a config file") from None
+    except PermissionError:
+        raise ConfigError(f"{path}: permission denied") from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {error.start} is 0x{data[error.start]:02x})") from None
 
 
 def _stretch_from_list(items: Any, source: str) -> tuple[StretchSpec, ...]:
@@ -278,10 +303,7 @@ def resolve_config(
     """Shipped preset < config file < explicit overrides (nested tables), validated."""
     table: dict[str, Any] = _preset_table(preset) if preset else {}
     if config_text is not None:
-        try:
-            file_table = tomllib.loads(config_text)
-        except tomllib.TOMLDecodeError as error:
-            raise ConfigError(f"{config_source}: not valid TOML: {error}") from None
+        file_table = _parse_toml(config_text, config_source)
         PipelineConfig.from_dict(file_table, source=config_source)  # name the file in its own errors
         table = _merge(table, file_table)
     if overrides:

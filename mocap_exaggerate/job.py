@@ -207,12 +207,12 @@ def convert(
         if influences not in (4, 8):
             raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
 
-    from .io.skin import load_skin
+    from .io.skin import check_skin, load_skin
     from .io.trails import read_trails
 
     paths = read_trails(path_file) if path_file is not None else None
-    if skin is not None and not isinstance(skin, Skin):
-        skin = load_skin(skin)
+    if skin is not None:
+        skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
 
     timings: dict[str, float] = {}
     motion, report = read_bvh(data, name=label, fps=config.input.fps)

@@ -136,7 +136,8 @@ def _extrapolate(state: State, config) -> State:
     weights = resolve_weights(skeleton, config.weights, state.limbs)
     positions = state.positions.copy()
     positions[first:] = extrapolate(
-        state.positions[first:], sigma=config.sigma_frames(state.motion.frame_time), omega=config.omega,
+        state.positions[first:], sigma=config.sigma_frames(state.motion.frame_time, len(state.positions) - first),
+        omega=config.omega,
         weights=weights,
     )
     return replace(state, positions=positions)

@@ -52,6 +52,10 @@ class Skin:
             raise ValueError(f"vertices must be (V, 3), got {v.shape}")
         if np.shape(self.joints) != np.shape(self.weights) or np.shape(self.joints)[0] != len(v):
             raise ValueError(f"joints {np.shape(self.joints)} and weights {np.shape(self.weights)} must be (V, K)")
+        for name in ("faces", "joints"):
+            values = np.asarray(getattr(self, name))
+            if values.dtype.kind not in "iub" and not np.array_equal(values, np.round(values)):
+                raise ValueError(f"{name} must be whole numbers")
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "faces", np.asarray(self.faces, dtype=np.int64).reshape(-1, 3))
         object.__setattr__(self, "joints", np.asarray(self.joints, dtype=np.int64))

@@ -38,6 +38,19 @@ _CHANNEL_NAMES = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
 _WHITESPACE = np.zeros(256, dtype=bool)
 _WHITESPACE[[9, 10, 11, 12, 13, 32]] = True
 
+#: A number as BVH exporters write it (no digit separators, hex or words); nan/inf are caught apart.
+_NUMBER_RE = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+#: Largest magnitude accepted for an offset or a channel value: far beyond any capture
+#: (a kilometre in millimetres is 1e6), small enough that squares and sums stay finite.
+MAX_VALUE = 1e9
+#: Frame rates accepted, from the header or given: slower than 1 fps or faster than
+#: 10,000 fps is a wrong header, not a clip.
+FPS_RANGE = (1.0, 10000.0)
+#: Deepest hierarchy and most joints read: deeper chains are not skeletons, and every
+#: stage's cost grows with them.
+MAX_DEPTH = 1000
+MAX_JOINTS = 10000
+
 _MOTION_RE = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE | re.IGNORECASE)
 _FRAMES_RE = re.compile(r"^\s*Frames\s*:\s*(\S*)\s*$", re.IGNORECASE)
 _FRAME_TIME_RE = re.compile(r"^\s*Frame\s+Time\s*:\s*(\S*)\s*$", re.IGNORECASE)
@@ -90,6 +103,9 @@ def read_bvh(
     report = BVHReport(source=label)
     if b"\x00" in data[:4096]:
         raise InputError("not a BVH file (binary data)", source=label, line=1)
+    if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):
+        # Old Mac line ends (CR alone): read them as LF; CRLF stays as it is.
+        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
 
     motion_match = _MOTION_RE.search(data)
     if motion_match is None:
@@ -135,9 +151,10 @@ def read_bvh(
                 frame_time = float(m.group(1))
             except ValueError:
                 raise InputError(f"frame time {m.group(1)!r} is not a number", source=label, line=line_no) from None
-            if not (np.isfinite(frame_time) and frame_time > 0) and fps is None:
+            if fps is None and not (np.isfinite(frame_time) and FPS_RANGE[0] <= 1.0 / max(frame_time, 1e-300) <= FPS_RANGE[1]):
                 raise InputError(
-                    f"frame time {m.group(1)} is not a positive number of seconds (give the frame rate, fps, to read it)",
+                    f"frame time {m.group(1)} is not a frame rate between {FPS_RANGE[0]:g} and {FPS_RANGE[1]:g} fps "
+                    "(give the frame rate, fps, to read it)",
                     source=label,
                     line=line_no,
                 )
@@ -151,13 +168,18 @@ def read_bvh(
     )
 
     if fps is not None:
-        if not (np.isfinite(fps) and fps > 0):
-            raise InputError(f"fps must be a positive number, got {fps}", source=label)
+        check_fps(fps, label)
         if report.header_fps and abs(report.header_fps - fps) > 1e-6 * fps:
             report.warnings.append(f"frame rate set to {fps:g} fps (header says {report.header_fps:g})")
         frame_time = 1.0 / fps
     motion = _motion_from_channels(skeleton, values, frame_time)
     return motion, report
+
+
+def check_fps(fps: float, source: str = "fps") -> None:
+    """InputError unless ``fps`` is a frame rate within `FPS_RANGE`."""
+    if not (isinstance(fps, (int, float)) and FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
+        raise InputError(f"fps must be between {FPS_RANGE[0]:g} and {FPS_RANGE[1]:g}, got {fps!r}", source=source)
 
 
 def load_bvh(path: str | os.PathLike | BinaryIO, *, fps: float | None = None) -> Motion:
@@ -248,12 +270,11 @@ class _Tokens:
         values = []
         for _ in range(count):
             token, line = self.next(what)
-            try:
-                value = float(token)
-            except ValueError:
-                raise self.error(f"{what}: {token!r} is not a number", line) from None
-            if not np.isfinite(value):
-                raise self.error(f"{what}: {token!r} is not a finite number", line)
+            if not _NUMBER_RE.match(token):
+                raise self.error(f"{what}: {token[:40]!r} is not a number", line)
+            value = float(token)
+            if not abs(value) <= MAX_VALUE:
+                raise self.error(f"{what}: {token[:40]} is out of range (at most {MAX_VALUE:g} in size)", line)
             values.append(value)
         return np.array(values)
 
@@ -335,6 +356,10 @@ def _parse_header(text: str, label: str) -> Skeleton:
         elif keyword == "JOINT":
             if offsets[joint] is None:
                 raise tokens.error(f"joint {names[joint]!r} has no OFFSET before its children", line)
+            if len(stack) >= MAX_DEPTH:
+                raise tokens.error(f"the hierarchy is more than {MAX_DEPTH} joints deep", line)
+            if len(names) >= MAX_JOINTS:
+                raise tokens.error(f"the hierarchy has more than {MAX_JOINTS} joints", line)
             stack.append(open_joint(joint, line))
         elif keyword == "END":
             site, site_line = tokens.next("'Site'")
@@ -425,22 +450,21 @@ def _parse_motion(
         values = np.fromstring(chunk, dtype=np.float64, sep=" ")
     except ValueError:
         values = None
-    if values is None or values.size != declared * num_channels or not np.all(np.isfinite(values)):
+    if values is None or values.size != declared * num_channels or not np.all(np.abs(values) <= MAX_VALUE):
         _raise_bad_value(chunk, first_line, label)
     return values.reshape(declared, num_channels)
 
 
 def _raise_bad_value(chunk: bytes, first_line: int, label: str) -> None:
-    """Find and report the first value that is not a finite number (error path only)."""
+    """Find and report the first value that is not a number in range (error path only)."""
     for offset, line in enumerate(chunk.split(b"\n")):
         for token in line.split():
-            try:
-                value = float(token)
-            except ValueError:
-                value = None
-            if value is None or not np.isfinite(value):
-                text = token.decode("latin-1")[:40]
-                raise InputError(f"motion value {text!r} is not a finite number", source=label, line=first_line + offset)
+            text = token.decode("latin-1")
+            if not _NUMBER_RE.match(text):
+                raise InputError(f"motion value {text[:40]!r} is not a number", source=label, line=first_line + offset)
+            if not abs(float(text)) <= MAX_VALUE:
+                raise InputError(f"motion value {text[:40]} is out of range (at most {MAX_VALUE:g} in size)",
+                                 source=label, line=first_line + offset)
     raise InputError("motion data could not be read", source=label, line=first_line)
 
 
@@ -514,29 +538,33 @@ def _fmt(value: float) -> str:
 
 
 def _format_header(motion: Motion) -> str:
+    """The HIERARCHY and MOTION header lines; depth-first with an explicit stack (no recursion limit)."""
     skeleton = motion.skeleton
     out = io.StringIO()
     children = [[] for _ in range(skeleton.num_joints)]
     for j in range(1, skeleton.num_joints):
         children[skeleton.parents[j]].append(j)
-
-    def write(j: int, depth: int) -> None:
-        pad = "\t" * depth
-        keyword = "ROOT" if j == 0 else "JOINT"
-        out.write(f"{pad}{keyword} {skeleton.names[j]}\n{pad}{{\n")
-        out.write(f"{pad}\tOFFSET {' '.join(_fmt(v) for v in skeleton.offsets[j])}\n")
-        chans = skeleton.channels[j]
-        out.write(f"{pad}\tCHANNELS {len(chans)}{''.join(' ' + c for c in chans)}\n")
-        for child in children[j]:
-            write(child, depth + 1)
-        if np.isfinite(skeleton.end_sites[j, 0]):
-            out.write(f"{pad}\tEnd Site\n{pad}\t{{\n")
-            out.write(f"{pad}\t\tOFFSET {' '.join(_fmt(v) for v in skeleton.end_sites[j])}\n")
-            out.write(f"{pad}\t}}\n")
-        out.write(f"{pad}}}\n")
-
     out.write("HIERARCHY\n")
-    write(0, 0)
+    # Items: ("open", joint, depth) writes a joint's head and schedules its children
+    # and its closing lines; ("close", joint, depth) writes its End Site and brace.
+    stack: list[tuple[str, int, int]] = [("open", 0, 0)]
+    while stack:
+        action, j, depth = stack.pop()
+        pad = "\t" * depth
+        if action == "open":
+            keyword = "ROOT" if j == 0 else "JOINT"
+            out.write(f"{pad}{keyword} {skeleton.names[j]}\n{pad}{{\n")
+            out.write(f"{pad}\tOFFSET {' '.join(_fmt(v) for v in skeleton.offsets[j])}\n")
+            chans = skeleton.channels[j]
+            out.write(f"{pad}\tCHANNELS {len(chans)}{''.join(' ' + c for c in chans)}\n")
+            stack.append(("close", j, depth))
+            stack.extend(("open", child, depth + 1) for child in reversed(children[j]))
+        else:
+            if np.isfinite(skeleton.end_sites[j, 0]):
+                out.write(f"{pad}\tEnd Site\n{pad}\t{{\n")
+                out.write(f"{pad}\t\tOFFSET {' '.join(_fmt(v) for v in skeleton.end_sites[j])}\n")
+                out.write(f"{pad}\t}}\n")
+            out.write(f"{pad}}}\n")
     frame_time = np.format_float_positional(motion.frame_time, trim="-")
     out.write(f"MOTION\nFrames: {motion.num_frames}\nFrame Time: {frame_time}\n")
     return out.getvalue()

@@ -5,8 +5,13 @@ The `Skin` type itself and influence pruning live in `mocap_exaggerate.skinning`
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 import os
+import struct
+import urllib.parse
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +19,7 @@ import numpy as np
 from ..errors import InputError
 from ..skinning import Skin, top_influences
 
-__all__ = ["load_skin", "load_npz_skin", "load_gltf_skin", "load_makehuman_skin", "npz_bytes"]
+__all__ = ["load_skin", "check_skin", "load_npz_skin", "load_gltf_skin", "load_makehuman_skin", "npz_bytes"]
 
 
 def load_npz_skin(path: str | os.PathLike) -> Skin:
@@ -22,15 +27,16 @@ def load_npz_skin(path: str | os.PathLike) -> Skin:
     ``(V, K)`` or dense weights ``(V, J)``."""
     label = str(path)
     try:
-        data = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as error:
+        with np.load(path, allow_pickle=False) as archive:
+            data = {name: archive[name] for name in archive.files}  # read now: a bad CRC shows here
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as error:
         raise InputError(f"not a readable .npz skin ({error})", source=label) from None
-    missing = {"vertices", "faces", "joint_names", "weights"} - set(data.files)
+    missing = {"vertices", "faces", "joint_names", "weights"} - set(data)
     if missing:
         raise InputError(f"skin .npz lacks {', '.join(sorted(missing))}", source=label)
     names = tuple(str(n) for n in data["joint_names"])
     weights = np.asarray(data["weights"], dtype=np.float64)
-    if "joints" in data.files:
+    if "joints" in data:
         joints = data["joints"]
     else:
         if weights.ndim != 2 or weights.shape[1] != len(names):
@@ -120,7 +126,7 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
     def read(index: int) -> np.ndarray:
         accessor = gltf.accessors[index]
         view = gltf.bufferViews[accessor.bufferView]
-        data = blob if blob is not None else gltf.get_data_from_buffer_uri(gltf.buffers[view.buffer].uri)
+        data = blob if blob is not None else _buffer_data(gltf.buffers[view.buffer].uri, Path(path).parent, label)
         width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}[accessor.type]
         dtype = {gl.FLOAT: np.float32, gl.UNSIGNED_BYTE: np.uint8, gl.UNSIGNED_SHORT: np.uint16,
                  gl.UNSIGNED_INT: np.uint32}[accessor.componentType]
@@ -162,18 +168,79 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
     return Skin(vertices, faces.astype(np.int64), names, top_j, top_w, bind)
 
 
+def _buffer_data(uri: str | None, folder: Path, label: str) -> bytes:
+    """A .gltf buffer's bytes: a data URI, or a file in the glTF's own folder (never elsewhere)."""
+    if not uri:
+        raise InputError("a buffer has no uri", source=label)
+    if uri.startswith("data:"):
+        header, _, payload = uri.partition(",")
+        if not header.endswith(";base64"):
+            raise InputError("buffer data URIs must be base64", source=label)
+        return base64.b64decode(payload, validate=True)
+    relative = Path(urllib.parse.unquote(uri))
+    target = (folder / relative).resolve()
+    if relative.is_absolute() or "://" in uri or not target.is_relative_to(folder.resolve()):
+        raise InputError(f"buffer uri {uri[:60]!r} points outside the glTF's folder", source=label)
+    try:
+        return target.read_bytes()
+    except OSError as error:
+        raise InputError(f"buffer {uri[:60]!r}: {error.strerror or error}", source=label) from None
+
+
+def check_skin(skin: Skin, source: str) -> Skin:
+    """``skin`` if its arrays make sense (InputError naming the first fault otherwise).
+
+    Vertices finite and in range; at least one face, every corner a vertex;
+    every joint index names a joint; weights finite, not negative, and every
+    vertex weighted.
+    """
+    vertices, faces, joints, weights = skin.vertices, skin.faces, skin.joints, skin.weights
+    if not len(vertices):
+        raise InputError("the skin has no vertices", source=source)
+    if not np.all(np.abs(vertices) <= 1e9):
+        raise InputError("vertex positions must be finite numbers (at most 1e9 in size)", source=source)
+    if not len(faces):
+        raise InputError("the skin has no faces", source=source)
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise InputError(f"face corners must be vertex numbers 0 to {len(vertices) - 1}, found "
+                         f"{faces.min() if faces.min() < 0 else faces.max()}", source=source)
+    if joints.size and (joints.min() < 0 or joints.max() >= len(skin.joint_names)):
+        raise InputError(f"joint indices must be 0 to {len(skin.joint_names) - 1} (one per joint name), found "
+                         f"{joints.min() if joints.min() < 0 else joints.max()}", source=source)
+    if not np.all(np.isfinite(weights)) or np.any(weights < 0):
+        raise InputError("weights must be finite and not negative", source=source)
+    unweighted = np.flatnonzero(weights.sum(axis=1) <= 0)
+    if len(unweighted):
+        raise InputError(f"{len(unweighted)} vertices (the first: {unweighted[0]}) have no weight", source=source)
+    return skin
+
+
 def load_skin(path: str | os.PathLike) -> Skin:
-    """A skin from ``.npz``, a glTF/GLB skinned mesh, or a MakeHuman ``.obj`` (with its ``.mhw`` beside it)."""
+    """A skin from ``.npz``, a glTF/GLB skinned mesh, or a MakeHuman ``.obj`` (with its ``.mhw`` beside it).
+
+    Whatever is wrong with the file ends in one InputError naming it; the
+    skin that comes back has passed `check_skin`.
+    """
+    label = str(path)
     suffix = Path(path).suffix.lower()
-    if not Path(path).exists():
-        raise InputError("no such skin file", source=str(path))
-    if suffix == ".npz":
-        return load_npz_skin(path)
-    if suffix in (".glb", ".gltf"):
-        return load_gltf_skin(path)
-    if suffix == ".obj":
-        return load_makehuman_skin(path)
-    raise InputError("skins are read from .npz, .glb/.gltf or a MakeHuman .obj (+ .mhw)", source=str(path))
+    loaders = {".npz": load_npz_skin, ".glb": load_gltf_skin, ".gltf": load_gltf_skin, ".obj": load_makehuman_skin}
+    if suffix not in loaders:
+        raise InputError("skins are read from .npz, .glb/.gltf or a MakeHuman .obj (+ .mhw)", source=label)
+    if not Path(path).is_file():
+        raise InputError("no such skin file" if not Path(path).exists() else "is a folder, not a skin file",
+                         source=label)
+    try:
+        skin = loaders[suffix](path)
+    except InputError:
+        raise
+    except PermissionError:
+        raise InputError("permission denied", source=label) from None
+    except (ValueError, TypeError, KeyError, IndexError, OverflowError, EOFError, AttributeError,
+            zipfile.BadZipFile, struct.error, binascii.Error, RecursionError) as error:
+        # Truncated archives, bad CRCs, arrays of the wrong type, accessors past their buffer...
+        raise InputError(f"not a readable {suffix[1:]} skin ({type(error).__name__}: {str(error)[:120]})",
+                         source=label) from None
+    return check_skin(skin, label)
 
 
 def npz_bytes(**arrays: np.ndarray) -> bytes:

@@ -33,7 +33,7 @@ def read_trails(path: str | os.PathLike) -> dict[str, tuple[list[int], np.ndarra
         raise InputError("no such path file", source=label) from None
     except IsADirectoryError:
         raise InputError("is a folder, not a trails file", source=label) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:
         raise InputError(f"not a JSON trails file ({error})", source=label) from None
     trails = data.get("trails", []) if isinstance(data, dict) else []
     if not isinstance(trails, list):
@@ -44,11 +44,11 @@ def read_trails(path: str | os.PathLike) -> dict[str, tuple[list[int], np.ndarra
             frames = [int(f) for f in trail["frames"]]
             points = np.asarray(trail["exaggerated"], dtype=np.float64)
             limb = str(trail["limb"])
-        except (KeyError, TypeError, ValueError, OverflowError):
+        except (KeyError, TypeError, ValueError, OverflowError, IndexError):
             raise InputError(f"trail #{number} needs limb, frames and exaggerated points", source=label) from None
-        if points.shape != (len(frames), 3) or not np.all(np.isfinite(points)):
+        if points.shape != (len(frames), 3) or not np.all(np.abs(points) <= 1e9):
             raise InputError(f"trail #{number} ({limb}) has {len(frames)} frames but points of shape {points.shape}; "
-                             "expected one finite x, y, z per frame", source=label)
+                             "expected one finite x, y, z (at most 1e9 in size) per frame", source=label)
         paths[limb] = (frames, points)
     if not paths:
         raise InputError("no trails in it", source=label)

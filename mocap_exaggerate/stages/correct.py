@@ -143,7 +143,8 @@ def correct(
         needed = np.ones(len(active), dtype=np.int64)
     else:
         ratio = np.log(target / start) / np.log1p(-delta)
-        needed = np.maximum(1, np.ceil(ratio - 1e-9)).astype(np.int64)
+        # A tiny delta needs more iterations than max_iter (or int64) can count: cap before converting.
+        needed = np.clip(np.ceil(ratio - 1e-9), 1, max_iter + 1).astype(np.int64)
         needed += (1.0 - delta) ** needed * start > target  # guard the rounding of the logs
     steps = np.minimum(needed, max_iter)
     keep = (1.0 - delta) ** steps  # share of each excess left

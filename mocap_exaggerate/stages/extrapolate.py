@@ -29,11 +29,18 @@ def parse_duration(value: str | float | int, frame_time: float, *, what: str = "
     if not match:
         raise ConfigError(f"{what} must look like 0.2s, 200ms or 18f, got {value!r}")
     number, unit = float(match.group(1)), (match.group(2) or "s")
+    if not np.isfinite(number):
+        raise ConfigError(f"{what} must be a finite duration, got {value!r}")
     if unit == "s":
         return number / frame_time
     if unit == "ms":
         return number / 1000.0 / frame_time
     return number
+
+
+#: Widest Gaussian accepted, whatever the clip (a minute; 100,000 frames).
+MAX_SIGMA_SECONDS = 60.0
+MAX_SIGMA_FRAMES = 100_000
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -58,13 +65,28 @@ class ExtrapolateConfig:
 
     def __post_init__(self) -> None:
         check_flag("extrapolate.enabled", self.enabled)
-        parse_duration(self.sigma, 1.0, what="extrapolate.sigma")
+        seconds = parse_duration(self.sigma, 1.0, what="extrapolate.sigma")
+        frames = parse_duration(self.sigma, np.inf, what="extrapolate.sigma")  # nonzero only for "18f"
+        if seconds > MAX_SIGMA_SECONDS if frames == 0 else frames > MAX_SIGMA_FRAMES:
+            raise ConfigError(f"extrapolate.sigma must be at most {MAX_SIGMA_SECONDS:g} s or {MAX_SIGMA_FRAMES} "
+                              f"frames, got {self.sigma!r}")
         check_number("extrapolate.omega", self.omega, 0, 50)
         for pattern, weight in self.weights:
             check_number(f"extrapolate.weights[{pattern!r}]", weight, 0, 10)
 
-    def sigma_frames(self, frame_time: float) -> float:
-        return parse_duration(self.sigma, frame_time, what="extrapolate.sigma")
+    def sigma_frames(self, frame_time: float, frames: int | None = None) -> float:
+        """Sigma in frames; with ``frames`` (the clip's length) also checked against it.
+
+        A Gaussian much wider than the clip averages nothing more, only costs
+        time and memory: sigma may be at most twice the clip (or 1000 frames).
+        """
+        sigma = parse_duration(self.sigma, frame_time, what="extrapolate.sigma")
+        if frames is not None and sigma > max(2 * frames, 1000):
+            raise ConfigError(
+                f"extrapolate.sigma {self.sigma!r} is {sigma:.4g} frames; at most twice the clip's length "
+                f"({frames} frames) or 1000 frames"
+            )
+        return sigma
 
 
 def gaussian_average(world_pos: np.ndarray, sigma: float, *, axis: int = 0) -> np.ndarray:

@@ -65,9 +65,8 @@ def _effective_lengths(skeleton) -> np.ndarray:
     return np.where(lengths < 1e-4 * skeleton.height(), 0.0, lengths)
 
 
-def _first_at_distance(skeleton, joint: int, rigid: np.ndarray) -> list[int]:
+def _first_at_distance(skeleton, joint: int, rigid: np.ndarray, lengths: np.ndarray) -> list[int]:
     """For each kept child branch of ``joint``, the first joint down it at non-zero rest distance."""
-    lengths = _effective_lengths(skeleton)
     out = []
     for child in skeleton.children(joint):
         if rigid[child]:
@@ -83,8 +82,7 @@ def _first_at_distance(skeleton, joint: int, rigid: np.ndarray) -> list[int]:
     return out
 
 
-def _first_above_at_distance(skeleton, joint: int) -> int:
-    lengths = _effective_lengths(skeleton)
+def _first_above_at_distance(skeleton, joint: int, lengths: np.ndarray) -> int:
     current = joint
     while current > 0 and lengths[current] <= 0:
         current = int(skeleton.parents[current])
@@ -114,11 +112,12 @@ def recover_orientations(
     world = np.zeros((frames, skeleton.num_joints, 4))
     world[..., 3] = 1.0
 
+    lengths = _effective_lengths(skeleton)
     single_joint, single_from, single_to = [], [], []
     for j in range(skeleton.num_joints):
         if rigid[j]:
             continue
-        targets = _first_at_distance(skeleton, j, rigid)
+        targets = _first_at_distance(skeleton, j, rigid, lengths)
         if len(targets) >= 2:
             u = source_pos[:, targets] - source_pos[:, j : j + 1]
             v = new_pos[:, targets] - new_pos[:, j : j + 1]
@@ -132,7 +131,7 @@ def recover_orientations(
             single_from.append(j)
             single_to.append(targets[0])
         else:
-            above = _first_above_at_distance(skeleton, j)
+            above = _first_above_at_distance(skeleton, j, lengths)
             if above >= 0:
                 single_joint.append(j)
                 single_from.append(above)

@@ -147,10 +147,15 @@ def _integrate_vectorised(follow, link_a, link_b, frame_time, substeps, stiffnes
     h = frame_time / substeps
     denominator = 1.0 + h * damping + h * h * stiffness
     links = len(link_a)
-    incidence = np.zeros((links, count))
-    incidence[np.arange(links), link_b] = 1.0
-    incidence[np.arange(links), link_a] -= 1.0
-    scatter = np.ascontiguousarray(-(h * link_stiffness / denominator) * incidence.T)
+    # Small skeletons: dense incidence products (fastest per call). Large ones (thousands of
+    # particles): indexing and bincount, whose cost grows with the links, not their square.
+    dense = count <= 600
+    if dense:
+        incidence = np.zeros((links, count))
+        incidence[np.arange(links), link_b] = 1.0
+        incidence[np.arange(links), link_a] -= 1.0
+        scatter = np.ascontiguousarray(-(h * link_stiffness / denominator) * incidence.T)
+    strength = h * link_stiffness / denominator
     pull = h * stiffness / denominator
     shrink = 1.0 / denominator
     alpha = ((np.arange(substeps) + 1.0) / substeps)[None, :, None, None]
@@ -173,11 +178,17 @@ def _integrate_vectorised(follow, link_a, link_b, frame_time, substeps, stiffnes
             v += push
             v -= pull * x
             if links:
-                e = incidence @ x
+                e = incidence @ x if dense else x[link_b] - x[link_a]
                 length = np.sqrt(np.einsum("lk,lk->l", e, e))
                 # 1 - rest / length; a collapsed link (length 0) has e = 0 and pulls with nothing.
                 scale = 1.0 - rest_k / np.maximum(length, 1e-300)
-                v += scatter @ (scale[:, None] * e)
+                if dense:
+                    v += scatter @ (scale[:, None] * e)
+                else:
+                    pull_links = (strength * scale)[:, None] * e
+                    for axis in range(3):
+                        v[:, axis] += np.bincount(link_a, pull_links[:, axis], count)
+                        v[:, axis] -= np.bincount(link_b, pull_links[:, axis], count)
             x = x + h * v
             if k % substeps == 0:
                 row += 1

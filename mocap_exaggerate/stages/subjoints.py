@@ -40,6 +40,8 @@ _MINOR_NAME = re.compile(
     r"finger|thumb|index|middle|ring|pinky|toe|eye|jaw|tongue|teeth|facial|twist|share|^__|nub$|_end$",
     re.IGNORECASE,
 )
+#: Most sub-links a link is cut into, by count or by length.
+MAX_CUTS = 32
 #: A side branch whose reach is under this share of its longest sibling's is minor.
 MINOR_REACH = 0.35
 
@@ -65,8 +67,8 @@ class SubjointConfig:
 
     def __post_init__(self) -> None:
         check_flag("subjoints.enabled", self.enabled)
-        if isinstance(self.per_link, bool) or not isinstance(self.per_link, int) or not 1 <= self.per_link <= 32:
-            raise ConfigError(f"subjoints.per_link must be a whole number from 1 to 32, got {self.per_link!r}")
+        if isinstance(self.per_link, bool) or not isinstance(self.per_link, int) or not 1 <= self.per_link <= MAX_CUTS:
+            raise ConfigError(f"subjoints.per_link must be a whole number from 1 to {MAX_CUTS}, got {self.per_link!r}")
         if self.sublink_length is not None:
             self._target(1.0)
         object.__setattr__(self, "groups", tuple(tuple(str(n) for n in g) for g in self.groups))
@@ -226,6 +228,12 @@ def build_hierarchy(skeleton: Skeleton, config: SubjointConfig | None = None) ->
     lengths = skeleton.link_lengths()
     if config.sublink_length is not None:
         target = config._target(skeleton.height())
+        most = float(np.max(lengths / target, initial=1.0))
+        if most > MAX_CUTS:
+            raise ConfigError(
+                f"subjoints.sublink_length {config.sublink_length!r} would cut the longest link into {most:.3g} "
+                f"sub-links; at most {MAX_CUTS} (a length of at least {lengths.max() / MAX_CUTS:.4g})"
+            )
         cuts = np.maximum(1, np.rint(lengths / target)).astype(np.int64)
     else:
         cuts = np.full(skeleton.num_joints, config.per_link, dtype=np.int64)
