@@ -209,7 +209,35 @@ def _quiet() -> bool:
 # ---------------------------------------------------------------------------- commands
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+class _Commands(click.Group):
+    """click's group, with usage mistakes reported in one line like every other error."""
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        standalone = kwargs.pop("standalone_mode", True)
+        try:
+            return super().main(*args, standalone_mode=False, **kwargs)
+        except click.exceptions.UsageError as error:
+            if not standalone:
+                raise
+            if type(error).__name__ == "NoArgsIsHelpError":  # bare command: the help is the answer
+                error.show()
+                sys.exit(error.exit_code)
+            where = f" (see '{error.ctx.command_path} --help')" if error.ctx is not None else ""
+            click.echo(f"Error: {error.format_message().rstrip('.')}{where}", err=True)
+            sys.exit(error.exit_code)
+        except click.ClickException as error:
+            if not standalone:
+                raise
+            error.show()
+            sys.exit(error.exit_code)
+        except click.exceptions.Abort:
+            if not standalone:
+                raise
+            click.echo("Aborted!", err=True)
+            sys.exit(1)
+
+
+@click.group(cls=_Commands, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(__version__, prog_name="mocap-exaggerate")
 @verbosity_options
 def cli() -> None:
@@ -382,7 +410,8 @@ def presets() -> None:
 
 
 def main() -> None:
-    cli(prog_name="mocap-exaggerate")
+    code = cli.main(prog_name="mocap-exaggerate")
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

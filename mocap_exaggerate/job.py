@@ -29,14 +29,14 @@ import numpy as np
 from .config import DEFAULT_PRESET, PipelineConfig, load_preset
 from .errors import ConfigError, InputError
 from .io.bvh import iter_bvh, read_bvh
-from .io.files import OutputExistsError, OutputSet, same_file
+from .io.files import OutputExistsError, OutputSet, remove_stale_temporaries, same_file
 from .outputs import file_digest
 from .limbs import find_limbs
 from .pipeline import PipelineResult, run
 from .skinning import Skin
 from .tpose import detect_rest_frames
 
-__all__ = ["JobRecord", "convert", "output_paths", "check_name", "check_targets", "describe"]
+__all__ = ["JobRecord", "convert", "output_paths", "check_name", "check_targets", "check_output_set", "describe"]
 
 #: Longest output name accepted: leaves room for suffixes and temporary names within 255 bytes.
 MAX_NAME = 200
@@ -219,6 +219,8 @@ def convert(
     timings["read"] = time.perf_counter() - started
     result = run(motion, config, paths=paths)
     timings.update(result.timings)
+    for target in targets.values():
+        remove_stale_temporaries(target)  # what a killed earlier run of these outputs left
     input_hash = file_digest(data)
     del data  # the input's bytes are not needed past this point; a long clip's are tens of MB
     info = None
@@ -263,7 +265,7 @@ def convert(
                             outputs=listed, reader_warnings=report.warnings, frames_in=motion.num_frames,
                             fps=motion.fps, timings=timings)
             written.add(targets["manifest"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))
-        written.commit()
+        written.commit(retire_first=targets.get("manifest"))
     return JobRecord(
         input=label,
         outputs={kind: path for kind, path in targets.items() if kind in outputs or kind == "manifest"},
@@ -277,6 +279,38 @@ def convert(
         manifest=info,
         result=result,
     )
+
+
+def check_output_set(manifest: str | os.PathLike) -> list[str]:
+    """What is wrong with the output set a manifest describes: an empty list when it is complete.
+
+    Complete means: the manifest reads, and every file it lists is there with
+    the hash it recorded. A run writes its manifest last and deletes the old
+    one before replacing anything, so a set interrupted at any point reads as
+    incomplete here, never as a complete set of mixed runs.
+    """
+    manifest = Path(manifest)
+    try:
+        info = json.loads(manifest.read_text(encoding="utf-8"))
+        hashes = info["outputs"]["hashes"]
+        names = {kind: info["outputs"][kind] for kind in hashes}
+    except FileNotFoundError:
+        return [f"{manifest}: no manifest"]
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        return [f"{manifest}: not a readable manifest ({type(error).__name__})"]
+    problems = []
+    for kind, digest in hashes.items():
+        if kind == "trails":  # a side file wherever the user put it, named as they gave it
+            continue
+        path = manifest.parent / Path(names[kind]).name
+        try:
+            actual = file_digest(path.read_bytes())
+        except OSError:
+            problems.append(f"{path}: missing")
+            continue
+        if actual != digest:
+            problems.append(f"{path}: not the file the manifest recorded")
+    return problems
 
 
 def _make_glb(*args):

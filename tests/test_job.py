@@ -169,3 +169,26 @@ def test_a_stage_added_to_the_declared_list_runs_in_its_place(sample_clip):
     assert run(motion, config, stages=STAGES[:3] + switched_off + STAGES[3:]).stages == plain.stages
     with pytest.raises(ValueError, match="orient"):
         run(motion, config, stages=STAGES[:-1])
+
+
+def test_a_set_is_complete_only_while_every_file_matches_its_manifest(sample_clip, tmp_path):
+    from mocap_exaggerate.job import check_output_set
+
+    record = convert(sample_clip, tmp_path, FAST, glb=False)
+    manifest = record.outputs["manifest"]
+    assert check_output_set(manifest) == []
+    record.outputs["bvh"].write_bytes(b"HIERARCHY\n")
+    assert check_output_set(manifest) == [f"{record.outputs['bvh']}: not the file the manifest recorded"]
+    record.outputs["bvh"].unlink()
+    assert check_output_set(manifest) == [f"{record.outputs['bvh']}: missing"]
+    manifest.unlink()
+    assert check_output_set(manifest) == [f"{manifest}: no manifest"]
+
+
+def test_the_next_run_clears_what_a_killed_one_left(sample_clip, tmp_path):
+    stale = tmp_path / ".cmu_09_01_run_daz.bvh.abc123.tmp"
+    stale.write_bytes(b"half a file")
+    other = tmp_path / ".someone_elses.bvh.abc123.tmp"
+    other.write_bytes(b"not ours")
+    convert(sample_clip, tmp_path, FAST, glb=False)
+    assert not stale.exists() and other.exists()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import glob
 import hashlib
 import os
 import tempfile
@@ -9,7 +10,7 @@ from pathlib import Path
 
 from ..errors import MocapError
 
-__all__ = ["OutputExistsError", "OutputSet", "atomic_write", "write_files", "same_file"]
+__all__ = ["OutputExistsError", "OutputSet", "atomic_write", "write_files", "same_file", "remove_stale_temporaries"]
 
 
 class OutputExistsError(MocapError, FileExistsError):
@@ -72,9 +73,19 @@ class OutputSet:
             raise OSError(error.errno, error.strerror or str(error), str(path)) from None
         return "sha256:" + digest.hexdigest()
 
-    def commit(self) -> None:
-        """Rename every temporary file onto its target, in order."""
+    def commit(self, *, retire_first: Path | None = None) -> None:
+        """Rename every temporary file onto its target, in order.
+
+        retire_first : a target (the manifest) to delete before anything is
+            renamed, so that while the renames run no old manifest can vouch
+            for a half-replaced set.
+        """
         self.created.clear()
+        if retire_first is not None:
+            try:
+                os.unlink(retire_first)
+            except FileNotFoundError:
+                pass
         while self.pending:
             tmp, path = self.pending[0]
             try:
@@ -100,6 +111,23 @@ class OutputSet:
 
     def __exit__(self, *exc) -> None:
         self.abort()
+
+
+def remove_stale_temporaries(path: str | os.PathLike) -> list[Path]:
+    """Delete temporary files that an interrupted write of ``path`` left beside it; the ones removed.
+
+    Only names this module makes (``.<name>.<random>.tmp`` in the same
+    folder) are touched: nothing else in the folder is.
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    removed = []
+    if folder.is_dir():
+        for stale in folder.glob(f".{glob.escape(path.name)}.*.tmp"):
+            if stale.is_file() and not stale.is_symlink():
+                _remove(str(stale))
+                removed.append(stale)
+    return removed
 
 
 def _remove(path: str) -> None:
