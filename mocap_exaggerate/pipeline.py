@@ -28,7 +28,7 @@ from .skeleton import Skeleton
 from .stages.correct import CorrectReport, correct
 from .stages.extrapolate import extrapolate
 from .stages.orient import motion_from_world, recover_orientations
-from .stages.springs import simulate_springs, spring_links, substeps_for
+from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping
 from .stages.subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints
 from .tpose import detect_rest_frames
@@ -209,7 +209,12 @@ def _springs(state: State, config) -> State:
         link_stiffness=config.link_stiffness, damping=config.damping, blend=config.blend, links=links,
     )
     substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
-    return replace(state, sub_positions=out, findings=state.with_findings(spring_substeps=substeps))
+    carried = stable_link_stiffness(frame_time, config.link_stiffness, links.degree, substeps)
+    notes = state.notes
+    if carried < config.link_stiffness:
+        notes += (f"springs: link stiffness {config.link_stiffness:g} is more than {substeps} substeps per frame "
+                  f"can carry at {1 / frame_time:g} fps; used {carried:.4g}",)
+    return replace(state, sub_positions=out, findings=state.with_findings(spring_substeps=substeps), notes=notes)
 
 
 def _orient(state: State, config) -> State:

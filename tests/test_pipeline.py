@@ -8,7 +8,7 @@ from mocap_exaggerate.errors import ConfigError
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.limbs import _side_from_name, find_limbs
 from mocap_exaggerate.config import PipelineConfig, load_preset, preset_names, resolve_config
-from mocap_exaggerate.pipeline import resolve_weights, run
+from mocap_exaggerate.pipeline import prepare, resolve_weights, run
 from mocap_exaggerate.rotations import quat_angle
 from mocap_exaggerate.tpose import detect_rest_frames
 
@@ -210,10 +210,10 @@ from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=40, deadline=None)
 @given(
     omega=st.sampled_from([0.0, 1.0, 50.0]),
-    sigma=st.sampled_from(["0f", "0.5f", "1s", "200f"]),
+    sigma=st.sampled_from(["0f", "0.5f", "1s", "200f", "1000f"]),
     threshold=st.sampled_from([0.0, 10.0]),
     delta=st.sampled_from([1e-3, 1.0]),
     max_stretch=st.sampled_from([1.0, 10.0]),
@@ -222,17 +222,26 @@ from hypothesis import strategies as st  # noqa: E402
     link_stiffness=st.sampled_from([0.0, 1e5]),
     damping=st.sampled_from([0.0, 1e4]),
     blend=st.sampled_from([0.0, 1.0]),
+    fps=st.sampled_from([None, 1.0, 10000.0]),
+    sublink=st.sampled_from([None, "1%", "50%"]),
 )
 def test_no_nan_or_inf_at_the_limits_the_cli_accepts(
-    omega, sigma, threshold, delta, max_stretch, per_link, stiffness, link_stiffness, damping, blend
+    omega, sigma, threshold, delta, max_stretch, per_link, stiffness, link_stiffness, damping, blend, fps, sublink
 ):
-    motion = CLIP_FOR_SWEEP
+    motion = CLIP_FOR_SWEEP if fps is None else CLIP_FOR_SWEEP.replace(frame_time=1.0 / fps)
+    subjoints = {"per_link": per_link} if sublink is None else {"sublink_length": sublink}
     config = resolve_config("cartoon", None, {
         "extrapolate": {"omega": omega, "sigma": sigma},
         "correct": {"threshold": threshold, "delta": delta, "max_stretch": max_stretch},
-        "subjoints": {"per_link": per_link},
+        "subjoints": subjoints,
         "springs": {"stiffness": stiffness, "link_stiffness": link_stiffness, "damping": damping, "blend": blend},
     })
+    frames_sigma = config.extrapolate.sigma_frames(motion.frame_time)
+    body = motion.num_frames - prepare(motion, config.input).first
+    if frames_sigma > max(2 * body, 1000):  # wider than the clip allows: one clear refusal
+        with pytest.raises(ConfigError, match="extrapolate.sigma .* at most twice the clip"):
+            run(motion, config)
+        return
     result = run(motion, config)
     assert np.all(np.isfinite(result.world_positions))
     assert np.all(np.isfinite(result.world_rotations))

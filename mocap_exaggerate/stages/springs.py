@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import ConfigError, check_flag, check_number
 
-__all__ = ["SpringConfig", "SpringLinks", "simulate_springs", "spring_links", "spring_substeps", "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE"]
+__all__ = ["SpringConfig", "SpringLinks", "simulate_springs", "spring_links", "spring_substeps", "stable_link_stiffness", "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE"]
 
 STIFFNESS_RANGE = (0.0, 1e5)
 DAMPING_RANGE = (0.0, 1e4)
@@ -72,6 +72,18 @@ def substeps_for(frame_time: float, stiffness: float, link_stiffness: float, max
     """
     omega = max(math.sqrt(2.0 * max(max_degree, 1) * link_stiffness), math.sqrt(stiffness))
     return int(min(MAX_SUBSTEPS, max(1, math.ceil(frame_time * omega))))
+
+
+def stable_link_stiffness(frame_time: float, link_stiffness: float, max_degree: int, substeps: int) -> float:
+    """The link stiffness the explicit link springs can carry at this step: ``link_stiffness`` or less.
+
+    Stability needs ``h sqrt(2 degree k_link) <= 1`` with ``h = frame_time /
+    substeps``. When even `MAX_SUBSTEPS` cannot give that (very stiff links on
+    a slow clip: 10^5 at 1 fps), the links are softened to the stiffest stable
+    value rather than left to blow up; the pipeline says so in its notes.
+    """
+    h = frame_time / substeps
+    return min(link_stiffness, 1.0 / (2.0 * max(max_degree, 1) * h * h))
 
 
 def _integrate(follow, link_a, link_b, frame_time, substeps, stiffness, link_stiffness, damping):  # pragma: no cover
@@ -270,6 +282,7 @@ def simulate_springs(
         return out
     members, link_a, link_b, degree = links or spring_links(parents, active)
     substeps = substeps_for(frame_time, stiffness, link_stiffness, degree)
+    link_stiffness = stable_link_stiffness(frame_time, link_stiffness, degree, substeps)
     follow = np.ascontiguousarray(positions[:, members])
     kernel = _integrate_vectorised if compiled else _integrate
     suspended = kernel(follow, link_a, link_b, float(frame_time), substeps, float(stiffness),

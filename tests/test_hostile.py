@@ -1,0 +1,282 @@
+"""Hostile and careless use, as a real process: one line on stderr, the right exit code, nothing lost.
+
+Every case runs ``mocap-exaggerate`` in a new process on a copy of a sample
+clip and checks: the exit code; for a failure, exactly one line on stderr
+starting with ``Error:`` and no traceback; the input files unchanged;
+nothing written outside the output folder; and for a failure, the output
+folder as it was (not even created). The cases are the ones a review found
+(issue 9) plus their neighbours.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import subprocess
+import sys
+import zipfile
+
+import numpy as np
+import pytest
+
+from .helpers import SAMPLE_DIR
+
+CLIP = SAMPLE_DIR / "cmu_09_01_run_daz.bvh"
+FAST = ["--subjoints", "2"]
+
+
+def run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", *map(str, args)],
+                          capture_output=True, text=True, timeout=120, cwd=cwd)
+
+
+def snapshot(folder):
+    return {str(p.relative_to(folder)): (p.read_bytes() if p.is_file() else None)
+            for p in sorted(folder.rglob("*"))}
+
+
+# ---------------------------------------------------------------------------- files for the attacks
+
+
+def npz(path, **arrays):
+    base = {"vertices": np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+            "faces": np.array([[0, 1, 2]]), "joint_names": np.array(["hip"]),
+            "joints": np.zeros((3, 1), dtype=np.int64), "weights": np.ones((3, 1))}
+    base.update(arrays)
+    np.savez(path, **{k: v for k, v in base.items() if v is not None})
+    return path
+
+
+def glb_with(path, change):
+    """Our own GLB of the clip (original skeleton, in its units), its JSON edited by ``change``."""
+    done = run("exaggerate", CLIP, "-o", path.parent / "made", "--skeleton", "original", "--units", "m", *FAST)
+    assert done.returncode == 0, done.stderr
+    data = (path.parent / "made" / f"{CLIP.stem}.glb").read_bytes()
+    length = struct.unpack_from("<I", data, 12)[0]
+    document = json.loads(data[20 : 20 + length])
+    change(document)
+    text = json.dumps(document).encode()
+    text += b" " * (-len(text) % 4)
+    rest = data[20 + length :]
+    path.write_bytes(struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(rest)) + struct.pack("<I4s", len(text), b"JSON")
+                     + text + rest)
+    return path
+
+
+def chain_bvh(path, depth):
+    lines = ["HIERARCHY", "ROOT J0", "{", "OFFSET 0 0 0", "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
+    for i in range(1, depth):
+        lines += [f"JOINT J{i}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
+    lines += ["End Site", "{", "OFFSET 0 1 0", "}"] + ["}"] * depth
+    values = " ".join(["0.5"] * (6 + 3 * (depth - 1)))
+    lines += ["MOTION", "Frames: 3", "Frame Time: 0.0333333"] + [values] * 3
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def edited_clip(path, edit):
+    path.write_bytes(edit(CLIP.read_bytes()))
+    return path
+
+
+def first_motion_value(data: bytes, new: bytes) -> bytes:
+    head, _, body = data.partition(b"Frame Time:\t0.00833333\n")
+    first, _, rest = body.partition(b" ")
+    return head + b"Frame Time:\t0.00833333\n" + new + b" " + rest
+
+
+# ---------------------------------------------------------------------------- the cases
+
+# Each case: id -> function(tmp, clip, out) returning (args, expected exit code, words expected in the error line).
+CASES = {
+    # 1. the input is never overwritten
+    "trails onto the input": lambda t, c, o: (["exaggerate", c, "-o", o, "--stretch", "left_arm:20-60:2", "--trails", c,
+                                               "--overwrite"], 2, "input"),
+    "preview onto the input": lambda t, c, o: (["preview", c, "-o", c, "--overwrite"], 2, "png"),
+    "preview onto the input named png": lambda t, c, o: (_preview_onto(_renamed(c, "clip.png")), 2, "input"),
+    "outputs onto the input": lambda t, c, o: (["exaggerate", c, "-o", c.parent, "--overwrite"], 2, "input"),
+    "path file onto an output": lambda t, c, o: (["exaggerate", c, "-o", o, "--path-file",
+                                                  _trails(t, o / "clip.json"), "--overwrite"], 2, "input"),
+    # 2. names stay in their folder
+    "name climbs out": lambda t, c, o: (["exaggerate", c, "-o", o, "--name", "../../etc/x"], 2, "name"),
+    "name absolute": lambda t, c, o: (["exaggerate", c, "-o", o, "--name", "/tmp/x"], 2, "name"),
+    "name with a folder": lambda t, c, o: (["exaggerate", c, "-o", o, "--name", "a/b"], 2, "name"),
+    "name too long": lambda t, c, o: (["exaggerate", c, "-o", o, "--name", "n" * 250], 2, "name"),
+    # 3. a folder in the way
+    "a folder named like an output": lambda t, c, o: (["exaggerate", c, "-o", _folder(o / "clip.glb"), "--overwrite"],
+                                                      2, "folder"),
+    "output is a file": lambda t, c, o: (["exaggerate", c, "-o", c], 2, "not a folder"),
+    # 4. values the options accept, files the tool reads
+    "sigma 1e9 s": lambda t, c, o: (["exaggerate", c, "-o", o, "--sigma", "1e9"], 2, "sigma"),
+    "sigma 1e9 frames": lambda t, c, o: (["exaggerate", c, "-o", o, "--sigma", "1e9f"], 2, "sigma"),
+    "sigma 1e400": lambda t, c, o: (["exaggerate", c, "-o", o, "--sigma", "1e400"], 2, "sigma"),
+    "sigma 30 s on a short clip": lambda t, c, o: (["exaggerate", c, "-o", o, "--sigma", "30s"], 2, "sigma"),
+    "sigma 100000 frames": lambda t, c, o: (["exaggerate", c, "-o", o, "--sigma", "100000f"], 2, "sigma"),
+    "fps 1e-300": lambda t, c, o: (["exaggerate", c, "-o", o, "--fps", "1e-300"], 2, "fps"),
+    "fps 0.001": lambda t, c, o: (["exaggerate", c, "-o", o, "--fps", "0.001"], 2, "fps"),
+    "info fps 1e6": lambda t, c, o: (["info", c, "--fps", "1e6"], 2, "fps"),
+    "fps nan": lambda t, c, o: (["exaggerate", c, "-o", o, "--fps", "nan"], 2, "fps"),
+    "omega inf": lambda t, c, o: (["exaggerate", c, "-o", o, "--omega", "inf"], 2, "omega"),
+    "sub-link length 1e-9": lambda t, c, o: (["exaggerate", c, "-o", o, "--sublink-length", "1e-9"], 2, "sublink"),
+    "sub-link length 0%": lambda t, c, o: (["exaggerate", c, "-o", o, "--sublink-length", "0%"], 2, "sublink"),
+    "config not UTF-8": lambda t, c, o: (["exaggerate", c, "-o", o, "--config", _bytes(t / "p.toml", b"\xff\xfe[x]")],
+                                         2, "UTF-8"),
+    "config nested 5000 deep": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
+                                                 _bytes(t / "p.toml", b"a = " + b"[" * 5000 + b"]" * 5000)], 2, "TOML"),
+    "config is a folder": lambda t, c, o: (["exaggerate", c, "-o", o, "--config", _folder(t / "conf")], 2,
+                                           "directory"),
+    "path file with trails 5": lambda t, c, o: (["exaggerate", c, "-o", o, "--path-file",
+                                                 _bytes(t / "e.json", b'{"trails": 5}')], 2, "trails"),
+    "path file with points of 1e300": lambda t, c, o: (["exaggerate", c, "-o", o, "--path-file", _bytes(
+        t / "e.json", json.dumps({"trails": [{"limb": "left_arm", "frames": [20, 21],
+                                               "exaggerated": [[1e300, 0, 0], [0, 0, 0]]}]}).encode())], 2, "trail"),
+    "root position 1e300": lambda t, c, o: (["exaggerate", edited_clip(t / "big.bvh", lambda d: first_motion_value(
+        d, b"1e300")), "-o", o], 2, "out of range"),
+    "digit separators": lambda t, c, o: (["exaggerate", edited_clip(t / "sep.bvh", lambda d: first_motion_value(
+        d, b"1_000")), "-o", o], 2, "'1_000'"),
+    "hierarchy 5000 deep": lambda t, c, o: (["exaggerate", chain_bvh(t / "deep.bvh", 5000), "-o", o], 2, "deep"),
+    "skin npz with string weights": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", npz(
+        t / "s.npz", weights=np.array([["a"], ["b"], ["c"]]))], 2, "skin"),
+    "skin npz joint 999": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", npz(
+        t / "s.npz", joints=np.full((3, 1), 999))], 2, "joint indices"),
+    "skin npz joint -1": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", npz(
+        t / "s.npz", joints=np.full((3, 1), -1))], 2, "joint indices"),
+    "skin npz NaN vertices": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", npz(
+        t / "s.npz", vertices=np.full((3, 3), np.nan))], 2, "vertex"),
+    "skin npz faces out of range": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", npz(
+        t / "s.npz", faces=np.array([[0, 1, 7]]))], 2, "face"),
+    "skin npz negative faces": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", npz(
+        t / "s.npz", faces=np.array([[0, 1, -2]]))], 2, "face"),
+    "skin npz negative weights": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", npz(
+        t / "s.npz", weights=-np.ones((3, 1)))], 2, "weights"),
+    "skin npz NaN weights": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", npz(
+        t / "s.npz", weights=np.full((3, 1), np.nan))], 2, "weights"),
+    "skin npz empty mesh": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", npz(
+        t / "s.npz", vertices=np.zeros((0, 3)), faces=np.zeros((0, 3), int), joints=np.zeros((0, 1), int),
+        weights=np.zeros((0, 1)))], 2, "no vertices"),
+    "skin npz pickled array": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _pickled(t / "s.npz")], 2, "skin"),
+    "skin npz truncated": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _cut(npz(t / "s.npz"))], 2, "skin"),
+    "skin npz bad CRC": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _bad_crc(npz(t / "s.npz"))], 2, "skin"),
+    "skin glb accessor past its buffer": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", glb_with(
+        t / "s.glb", lambda d: d["accessors"][0].update(count=10**9))], 2, "skin"),
+    "skin glb SHORT joints": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", glb_with(
+        t / "s.glb", _short_joints)], 2, "skin"),
+    "skin glb skin index out of range": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", glb_with(
+        t / "s.glb", lambda d: next(n for n in d["nodes"] if "skin" in n).update(skin=7))], 2, "skin"),
+    "skin gltf buffer outside its folder": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _gltf(
+        t, "../../../../../etc/hostname")], 2, "outside"),
+    "skin gltf absolute buffer": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _gltf(t, "/etc/hostname")],
+                                                  2, "outside"),
+    # 6. wrong output with exit 0 before
+    "delta 1e-300 runs and says so": lambda t, c, o: (["exaggerate", c, "-o", o, "--delta", "1e-300", *FAST], 0, ""),
+    # 8. files other tools write
+    "CR-only line ends": lambda t, c, o: (["exaggerate", edited_clip(t / "mac.bvh", lambda d: d.replace(b"\n", b"\r")),
+                                           "-o", o, *FAST], 0, ""),
+    "a 500-level chain": lambda t, c, o: (["exaggerate", chain_bvh(t / "chain.bvh", 500), "-o", o, "--no-glb",
+                                           "--subjoints", "1"], 0, ""),
+    # usage
+    "unknown option": lambda t, c, o: (["exaggerate", c, "-o", o, "--omgea", "3"], 2, "--omgea"),
+    "missing input": lambda t, c, o: (["exaggerate", "-o", o], 2, "IN.bvh"),
+    "no such clip": lambda t, c, o: (["exaggerate", t / "none.bvh", "-o", o], 2, "no such file"),
+    "a folder as the clip": lambda t, c, o: (["exaggerate", t, "-o", o], 2, "folder"),
+    "unknown preset": lambda t, c, o: (["exaggerate", c, "-o", o, "--preset", "wild"], 2, "preset"),
+    "bad weight": lambda t, c, o: (["exaggerate", c, "-o", o, "--weight", "hip=lots"], 2, "weight"),
+    "unknown joint weight": lambda t, c, o: (["exaggerate", c, "-o", o, "--weight", "Tail=2"], 2, "Tail"),
+    "stretch outside the clip": lambda t, c, o: (["exaggerate", c, "-o", o, "--stretch", "left_arm:100-900:2"],
+                                                 2, "frames"),
+}
+
+
+def _preview_onto(clip):
+    return ["preview", clip, "-o", clip, "--overwrite"]
+
+
+def _renamed(clip, name):
+    target = clip.parent / name
+    clip.rename(target)
+    return target
+
+
+def _folder(path):
+    path.mkdir(parents=True, exist_ok=True)
+    return path.parent if path.suffix == ".glb" else path
+
+
+def _bytes(path, data):
+    path.write_bytes(data)
+    return path
+
+
+def _trails(tmp, target):
+    """A valid path file that lives where an output would be written."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_text(json.dumps({"trails": [{"limb": "left_arm", "frames": [20, 21],
+                                              "exaggerated": [[0, 0, 0], [1, 1, 1]]}]}))
+    return target
+
+
+def _pickled(path):
+    np.savez(path, vertices=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]), joint_names=np.array(["hip"]),
+             joints=np.zeros((3, 1), int), weights=np.array([[object()]] * 3, dtype=object))
+    return path
+
+
+def _cut(path):
+    path.write_bytes(path.read_bytes()[:200])
+    return path
+
+
+def _bad_crc(path):
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as archive:
+        info = archive.getinfo("vertices.npy")
+    data[info.header_offset + 30 + len(info.filename) + 100] ^= 0xFF  # inside the stored array data
+    path.write_bytes(bytes(data))
+    return path
+
+
+def _short_joints(document):
+    attributes = document["meshes"][0]["primitives"][0]["attributes"]
+    document["accessors"][attributes["JOINTS_0"]]["componentType"] = 5122
+
+
+def _gltf(tmp, uri):
+    path = tmp / "skin.gltf"
+    path.write_text(json.dumps({
+        "asset": {"version": "2.0"}, "buffers": [{"uri": uri, "byteLength": 64}],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "JOINTS_0": 0, "WEIGHTS_0": 0}}]}],
+        "nodes": [{"name": "hip"}, {"mesh": 0, "skin": 0}], "skins": [{"joints": [0]}],
+    }))
+    return path
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_one_clean_line_and_nothing_lost(tmp_path, case):
+    work = tmp_path / "work"
+    work.mkdir()
+    clip = work / "clip.bvh"
+    clip.write_bytes(CLIP.read_bytes())
+    out = tmp_path / "out"
+    args, code, words = CASES[case](work, clip, out)
+    inputs = snapshot(work)
+    outside = {p.name for p in tmp_path.iterdir()}
+    out_before = snapshot(out) if out.exists() else None
+    done = run(*args, cwd=work)
+    assert done.returncode == code, done.stderr
+    assert "Traceback" not in done.stderr
+    assert snapshot(work) == inputs, "an input (or the folder it is in) changed"
+    assert {p.name for p in tmp_path.iterdir()} <= outside | {"out"}, "something was written outside the output folder"
+    if code:
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("Error: "), done.stderr
+        assert words.lower() in lines[0].lower(), lines[0]
+        assert (snapshot(out) if out.exists() else None) == out_before, "a refused run wrote into the output folder"
+
+
+def test_a_tiny_delta_reports_the_frames_it_could_not_correct(tmp_path):
+    done = run("exaggerate", CLIP, "-o", tmp_path, "--delta", "1e-300", "--max-iter", "50", *FAST)
+    assert done.returncode == 0, done.stderr
+    report = json.loads((tmp_path / f"{CLIP.stem}.json").read_text())["result"]["correct"]
+    assert 1 <= report["iterations"] <= 50 and report["unconverged_frames"] > 0
