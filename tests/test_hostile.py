@@ -106,6 +106,8 @@ CASES = {
     "a folder named like an output": lambda t, c, o: (["exaggerate", c, "-o", _folder(o / "clip.glb"), "--overwrite"],
                                                       2, "folder"),
     "output is a file": lambda t, c, o: (["exaggerate", c, "-o", c], 2, "not a folder"),
+    "output folder under a file (an I/O failure, exit 1)": lambda t, c, o: (["exaggerate", c, "-o", c / "sub"], 1,
+                                                                            "clip.bvh/sub/clip.bvh"),
     # 4. values the options accept, files the tool reads
     "sigma 1e9 s": lambda t, c, o: (["exaggerate", c, "-o", o, "--sigma", "1e9"], 2, "sigma"),
     "sigma 1e9 frames": lambda t, c, o: (["exaggerate", c, "-o", o, "--sigma", "1e9f"], 2, "sigma"),
@@ -280,3 +282,89 @@ def test_a_tiny_delta_reports_the_frames_it_could_not_correct(tmp_path):
     assert done.returncode == 0, done.stderr
     report = json.loads((tmp_path / f"{CLIP.stem}.json").read_text())["result"]["correct"]
     assert 1 <= report["iterations"] <= 50 and report["unconverged_frames"] > 0
+
+
+# ---------------------------------------------------------------------------- fuzzing
+
+from click.testing import CliRunner  # noqa: E402
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from mocap_exaggerate.errors import MocapError  # noqa: E402
+from mocap_exaggerate.io.bvh import read_bvh  # noqa: E402
+from mocap_exaggerate_cli.main import cli  # noqa: E402
+
+
+def _short_clip() -> bytes:
+    """The sample clip cut to 30 frames: quick to run, every part of the format present."""
+    data = CLIP.read_bytes()
+    head, _, body = data.partition(b"MOTION")
+    lines = body.splitlines()[1:]
+    return head + b"MOTION\nFrames: 30\n" + lines[1] + b"\n" + b"\n".join(lines[2:32]) + b"\n"
+
+
+SHORT = _short_clip()
+TOKENS = [b"{", b"}", b"JOINT", b"End Site", b"OFFSET", b"CHANNELS 3", b"MOTION", b"Frames: 9", b"nan", b"1e999",
+          b"-", b"\t", b"\r", b"\n", b"\x00", b"\xff", b"1_0", b"0x10", b"9" * 400]
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_mangled_bvh_bytes_read_or_fail_with_one_input_error(data):
+    clip = bytearray(SHORT)
+    for _ in range(data.draw(st.integers(1, 4))):
+        kind = data.draw(st.sampled_from(["flip", "cut", "insert", "delete"]))
+        at = data.draw(st.integers(0, len(clip)))
+        if kind == "flip" and at < len(clip):
+            clip[at] = data.draw(st.integers(0, 255))
+        elif kind == "cut":
+            del clip[at:]
+        elif kind == "insert":
+            clip[at:at] = data.draw(st.sampled_from(TOKENS))
+        else:
+            del clip[at : at + data.draw(st.integers(1, 40))]
+    try:
+        motion, _ = read_bvh(bytes(clip))
+    except MocapError as error:
+        assert "\n" not in str(error) and str(error).startswith("<bytes>")
+        return
+    assert np.all(np.isfinite(motion.local_positions)) and np.all(np.isfinite(motion.local_rotations))
+
+
+NUMBERS = st.sampled_from(["0", "-1", "1e-300", "1e300", "nan", "inf", "-inf", "1e9", "3", "0.5", "abc", "", "1_0"])
+OPTIONS = {
+    "--sigma": st.sampled_from(["0.2s", "0f", "1e9f", "-1s", "1e400", "18 f", "ms", "0.05", "nan"]),
+    "--omega": NUMBERS, "--threshold": NUMBERS, "--delta": NUMBERS, "--max-stretch": NUMBERS,
+    "--max-iter": st.sampled_from(["1", "0", "-5", "1e3", "100000", "100001"]),
+    "--subjoints": st.sampled_from(["1", "0", "33", "-1", "x"]),
+    "--sublink-length": st.sampled_from(["3%", "0%", "1e-9", "-2", "200%", "1e300", "x%"]),
+    "--stiffness": NUMBERS, "--link-stiffness": NUMBERS, "--damping": NUMBERS, "--blend": NUMBERS,
+    "--fps": NUMBERS, "--tpose": st.sampled_from(["auto", "drop", "keep", "maybe"]),
+    "--weight": st.sampled_from(["hip=0", "left_arm=2", "Left*=11", "=1", "x", "hip=nan", "nothere=1"]),
+    "--stretch": st.sampled_from(["left_arm:5-20:2", "left_arm:20-5:2", "left_arm:1-2:6", "wing:1-9:2", "left_arm:0-29:0",
+                                  "left_arm:1s-2s:2", "right_leg:3-25:1.5:axes=y:pivot=end:ease_in=0.6,0.2"]),
+    "--units": st.sampled_from(["auto", "cm", "furlong"]),
+    "--influences": st.sampled_from(["4", "8", "5"]),
+    "--name": st.sampled_from(["ok", "../up", "a/b", ".dot", "n" * 300]),
+    "--skeleton": st.sampled_from(["sub", "original", "both"]),
+}
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(picked=st.dictionaries(st.sampled_from(sorted(OPTIONS)), st.just(None), max_size=4), data=st.data())
+def test_option_values_end_in_success_or_one_line(tmp_path_factory, picked, data):
+    folder = tmp_path_factory.mktemp("fuzz")
+    clip = folder / "clip.bvh"
+    clip.write_bytes(SHORT)
+    args = ["exaggerate", str(clip), "-o", str(folder / "out"), "--no-glb", "--subjoints", "2"]
+    for option in picked:
+        args += [option, data.draw(OPTIONS[option], label=option)]
+    result = CliRunner().invoke(cli, args)
+    assert result.exception is None or isinstance(result.exception, SystemExit), (args, result.exception)
+    assert result.exit_code in (0, 2), (args, result.stderr)
+    if result.exit_code:
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("Error: "), (args, result.stderr)
+        assert not (folder / "out").exists(), args
+    assert clip.read_bytes() == SHORT
+    assert {p.name for p in folder.iterdir()} <= {"clip.bvh", "out"}, args
