@@ -152,14 +152,32 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
     keep = weight > 0
     vertex, original, weight = vertex[keep], original[keep], weight[keep]
     per_entry = counts[original]
-    entry = np.repeat(np.arange(len(vertex)), per_entry)
-    segment = seg_start[original][entry] + (np.arange(len(entry)) - np.repeat(np.cumsum(per_entry) - per_entry, per_entry))
-    distance = segment_distance(skin.vertices[vertex[entry]], rest[seg_head[segment]], rest[seg_tail[segment]])
     floor = 1e-6 * max(sub.height(), 1e-9)
-    inverse = 1.0 / np.maximum(distance, floor)
-    share = inverse / np.bincount(entry, weights=inverse, minlength=len(vertex))[entry]
-    values = share * weight[entry]
-    joints, weights = top_influences(vertex[entry], seg_head[segment], values, skin.num_vertices, max_influences)
+    # In blocks of whole entries of about a million segment rows: a joint that owns hundreds of
+    # sub-links (a root with many children) would otherwise expand to gigabytes. Each entry
+    # keeps only its strongest few rows: a vertex's strongest influences are among them.
+    ends = np.cumsum(per_entry)
+    rows, cols, vals = [], [], []
+    first = 0
+    while first < len(vertex):
+        last = max(first + 1, int(np.searchsorted(ends, (ends[first - 1] if first else 0) + 1_000_000, "right")))
+        block = np.arange(first, last)
+        count = per_entry[block]
+        entry = np.repeat(np.arange(len(block)), count)
+        within = np.arange(len(entry)) - np.repeat(np.cumsum(count) - count, count)
+        segment = seg_start[original[block]][entry] + within
+        distance = segment_distance(skin.vertices[vertex[block][entry]], rest[seg_head[segment]], rest[seg_tail[segment]])
+        inverse = 1.0 / np.maximum(distance, floor)
+        values = inverse / np.bincount(entry, weights=inverse, minlength=len(block))[entry] * weight[block][entry]
+        order = np.lexsort((-values, entry))  # by entry, strongest first; entries keep their sizes
+        strongest = order[within < max_influences]
+        rows.append(vertex[block][entry[strongest]])
+        cols.append(seg_head[segment[strongest]])
+        vals.append(values[strongest])
+        first = last
+    joints, weights = top_influences(np.concatenate(rows or [np.zeros(0, np.int64)]),
+                                     np.concatenate(cols or [np.zeros(0, np.int64)]),
+                                     np.concatenate(vals or [np.zeros(0)]), skin.num_vertices, max_influences)
     return Skin(skin.vertices, skin.faces, sub.names, joints, weights)
 
 
