@@ -45,11 +45,28 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     radii = np.clip(0.22 * lengths, 0.025 * height, 0.05 * height)
     if not len(heads):  # a skeleton with no link at all: a ball on the root
         heads, tails, radii = np.array([0]), np.array([0]), np.array([0.05 * max(height, 1e-3)])
-    capsules = [_capsule(points[a], points[b], r) for a, b, r in zip(heads, tails, radii)]
-    body = manifold3d.Manifold.batch_boolean(capsules, manifold3d.OpType.Add) if len(capsules) > 1 else capsules[0]
-    mesh = body.to_mesh64()
-    vertices = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3]
-    faces = np.asarray(mesh.tri_verts, dtype=np.int64)
+    # Humanoids have 20 to 100 capsules. Beyond MAX_UNION (a root with hundreds of children) the
+    # union's cost grows much faster than the count (600 took minutes): the capsules are then
+    # kept as separate closed pieces, coarser, so the body stays bounded in time and size.
+    many = len(heads) > MAX_UNION
+    segments = max(8, int(_SEGMENTS * np.sqrt(MAX_UNION / len(heads)))) if many else _SEGMENTS
+    capsules = [_capsule(points[a], points[b], r, segments) for a, b, r in zip(heads, tails, radii)]
+    if many:
+        meshes = [capsule.to_mesh64() for capsule in capsules]
+    else:
+        body = manifold3d.Manifold.batch_boolean(capsules, manifold3d.OpType.Add) if len(capsules) > 1 else capsules[0]
+        meshes = [body.to_mesh64()]
+    pieces = [np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3] for mesh in meshes]
+    starts = np.cumsum([0] + [len(piece) for piece in pieces[:-1]])
+    vertices = np.concatenate(pieces)
+    faces = np.concatenate([np.asarray(mesh.tri_verts, dtype=np.int64) + start for mesh, start in zip(meshes, starts)])
+    if many:
+        # Separate pieces: each moves with its own link's head joint (no search over thousands of links).
+        owner = np.repeat(heads, [len(piece) for piece in pieces])
+        joints = np.zeros((len(vertices), 4), dtype=np.int64)
+        weights = np.zeros((len(vertices), 4))
+        joints[:, 0], weights[:, 0] = owner, 1.0
+        return Skin(vertices, faces, skeleton.names, joints, weights)
     # Weights: inverse fourth power of the distance to the nearest four links, each link
     # moving with its head joint (an End Site's link with the joint itself).
     count = min(4, len(heads))
@@ -67,11 +84,11 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     return Skin(vertices, faces, skeleton.names, joints, weights)
 
 
-def _capsule(a: np.ndarray, b: np.ndarray, radius: float):
+def _capsule(a: np.ndarray, b: np.ndarray, radius: float, segments: int = 20):
     """A capsule (a ``manifold3d.Manifold``) from point ``a`` to ``b``: the hull of two spheres."""
     import manifold3d
 
-    ball = manifold3d.Manifold.sphere(float(radius), _SEGMENTS)
+    ball = manifold3d.Manifold.sphere(float(radius), segments)
     if np.allclose(a, b):
         return ball.translate(tuple(float(v) for v in a))
     return manifold3d.Manifold.batch_hull([ball.translate(tuple(float(v) for v in a)),
@@ -80,3 +97,5 @@ def _capsule(a: np.ndarray, b: np.ndarray, radius: float):
 
 #: Segments around each capsule: 20 reads as round in a preview; bodies come out at 1.1k-1.6k vertices.
 _SEGMENTS = 20
+#: Most capsules merged by a boolean union; more are kept as separate pieces.
+MAX_UNION = 150

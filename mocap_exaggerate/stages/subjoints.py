@@ -142,17 +142,24 @@ def minor_branches(skeleton: Skeleton, extra_rigid: tuple[str, ...] = ()) -> np.
         if name.endswith(("_arm", "_leg")):
             below = skeleton.descendants(limb.end)[1:]
             rigid[below] = True
-    reach = _reach(skeleton)
+    # Each branch's reach from its parent, and the longest among each joint's children: once,
+    # not per joint (a root with thousands of children made this quadratic).
+    through = _reach(skeleton) + skeleton.link_lengths()
+    parents = skeleton.parents
+    longest = np.zeros(count)
+    np.maximum.at(longest, parents[1:], through[1:])
+    siblings = np.bincount(parents[1:], minlength=count)
+    minor = np.zeros(count, bool)
     for j in range(1, count):
-        if protected[j] or rigid[j]:
+        if protected[j]:
             continue
         if _MINOR_NAME.search(skeleton.names[j]):
-            rigid[skeleton.descendants(j)] = True
-            continue
-        siblings = skeleton.children(skeleton.parents[j])
-        longest = max(reach[s] + skeleton.link_lengths()[s] for s in siblings)
-        if len(siblings) > 1 and reach[j] + skeleton.link_lengths()[j] < MINOR_REACH * longest:
-            rigid[skeleton.descendants(j)] = True
+            minor[j] = True
+        elif siblings[parents[j]] > 1 and through[j] < MINOR_REACH * longest[parents[j]]:
+            minor[j] = True
+    # A minor joint takes its whole subtree with it (parents come before children).
+    for j in range(1, count):
+        rigid[j] |= minor[j] or rigid[parents[j]] and not protected[j]
     for pattern in extra_rigid:
         matched = skeleton.match(pattern)
         if not len(matched):
