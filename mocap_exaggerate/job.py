@@ -28,7 +28,7 @@ import numpy as np
 
 from .config import DEFAULT_PRESET, PipelineConfig, load_preset
 from .errors import ConfigError, InputError
-from .io.bvh import iter_bvh, read_bvh
+from .io.bvh import iter_bvh, read_bvh, read_source
 from .io.files import OutputExistsError, OutputSet, remove_stale_temporaries, same_file
 from .outputs import file_digest
 from .limbs import find_limbs
@@ -104,24 +104,13 @@ def output_paths(folder: str | os.PathLike, name: str, *, glb: bool = True,
     return paths
 
 
-def _read_input(source: Source, label: str | None) -> tuple[bytes, str, str]:
-    """The input's bytes, its label for messages and a default output name."""
+def _default_name(source: Source) -> str:
+    """The output stem when none is given: the input file's, else ``clip`` (bytes) or ``stdin`` (a stream)."""
     if isinstance(source, (bytes, bytearray)):
-        return bytes(source), label or "<bytes>", "clip"
-    if hasattr(source, "read"):
-        data = source.read()
-        name = label or getattr(source, "name", None) or "<stream>"
-        return (data.encode("utf-8") if isinstance(data, str) else data), str(name), "stdin"
-    path = Path(source)
-    label = label or str(path)
-    try:
-        return path.read_bytes(), label, path.stem
-    except FileNotFoundError:
-        raise InputError("no such file", source=label) from None
-    except IsADirectoryError:
-        raise InputError("is a folder; give a .bvh file", source=label) from None
-    except PermissionError:
-        raise InputError("permission denied", source=label) from None
+        return "clip"
+    if hasattr(source, "read") or str(source) == "-":
+        return "stdin"
+    return Path(source).stem
 
 
 def check_targets(targets: dict[str, Path], inputs: list[Path], overwrite: bool) -> None:
@@ -190,8 +179,8 @@ def convert(
         config = load_preset(preset or DEFAULT_PRESET)
     to_stream = hasattr(output, "write")
     inputs = [Path(p) for p in (source, path_file, skin) if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
-    data, label, default_name = _read_input(source, label)
-    stem = check_name(name if name is not None else default_name)
+    data, label = read_source(source, label)
+    stem = check_name(name if name is not None else _default_name(source))
     if to_stream:
         targets = {"trails": Path(trails)} if trails is not None else {}
     else:

@@ -29,7 +29,7 @@ from ..rotations import quat_from_euler, quat_to_euler
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .files import atomic_write
 
-__all__ = ["BVHReport", "read_bvh", "load_bvh", "save_bvh", "format_bvh", "iter_bvh", "format_fixed", "motion_channels"]
+__all__ = ["BVHReport", "read_bvh", "read_source", "load_bvh", "save_bvh", "format_bvh", "iter_bvh", "format_fixed", "motion_channels"]
 
 log = logging.getLogger(__name__)
 
@@ -99,7 +99,7 @@ def read_bvh(
     InputError
         with ``file:line: problem`` for anything malformed.
     """
-    data, label = _read_bytes(source, name)
+    data, label = read_source(source, name)
     report = BVHReport(source=label)
     if b"\x00" in data[:4096]:
         raise InputError("not a BVH file (binary data)", source=label, line=1)
@@ -190,7 +190,8 @@ def load_bvh(path: str | os.PathLike | BinaryIO, *, fps: float | None = None) ->
     return motion
 
 
-def _read_bytes(source, name: str | None) -> tuple[bytes, str]:
+def read_source(source, name: str | None = None) -> tuple[bytes, str]:
+    """The bytes of a path, ``"-"`` (standard input), bytes or a binary stream, and how to name it in messages."""
     if isinstance(source, (bytes, bytearray)):
         return bytes(source), name or "<bytes>"
     if hasattr(source, "read"):
