@@ -169,11 +169,21 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
         distance = segment_distance(skin.vertices[vertex[block][entry]], rest[seg_head[segment]], rest[seg_tail[segment]])
         inverse = 1.0 / np.maximum(distance, floor)
         values = inverse / np.bincount(entry, weights=inverse, minlength=len(block))[entry] * weight[block][entry]
-        order = np.lexsort((-values, entry))  # by entry, strongest first; entries keep their sizes
-        strongest = order[within < max_influences]
-        rows.append(vertex[block][entry[strongest]])
-        cols.append(seg_head[segment[strongest]])
-        vals.append(values[strongest])
+        # Segments that start at the same sub-joint (a hip's links to each leg) are one influence:
+        # sum them per (entry, sub-joint) first, then keep each entry's strongest sub-joints.
+        heads = seg_head[segment]
+        order = np.lexsort((heads, entry))
+        new = np.concatenate([[True], (entry[order][1:] != entry[order][:-1]) | (heads[order][1:] != heads[order][:-1])])
+        starts = np.flatnonzero(new)
+        pair_entry, pair_head = entry[order][starts], heads[order][starts]
+        pair_value = np.add.reduceat(values[order], starts)
+        ranked = np.lexsort((-pair_value, pair_entry))  # by entry, strongest first
+        sizes = np.bincount(pair_entry, minlength=len(block))
+        rank = np.arange(len(ranked)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+        strongest = ranked[rank < max_influences]
+        rows.append(vertex[block][pair_entry[strongest]])
+        cols.append(pair_head[strongest])
+        vals.append(pair_value[strongest])
         first = last
     joints, weights = top_influences(np.concatenate(rows or [np.zeros(0, np.int64)]),
                                      np.concatenate(cols or [np.zeros(0, np.int64)]),

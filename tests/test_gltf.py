@@ -246,3 +246,36 @@ def test_vertex_normals_are_trimeshs(sample_clip):
     # A vertex on no face still gets a unit normal (the validator checks them).
     lonely = vertex_normals(np.vstack([skin.vertices, [[0.0, 0.0, 0.0]]]), skin.faces)
     np.testing.assert_allclose(np.linalg.norm(lonely, axis=1), 1.0)
+
+
+def test_blocked_reweighting_equals_the_whole_expansion(sample_clip):
+    """The blocked, pruned re-weighting gives what expanding every entry over every owned segment gives."""
+    from mocap_exaggerate.skinning import _owner, top_influences
+
+    skeleton = read_bvh(sample_clip)[0].skeleton
+    hierarchy = build_hierarchy(skeleton)
+    skin = default_skin(skeleton, hierarchy.rigid)
+    sub = hierarchy.skeleton
+    rest = subjoint_bind_positions(skeleton, hierarchy)
+    owner = np.array([_owner(hierarchy, int(p)) for p in sub.parents[1:]])
+    rows, cols, vals = [], [], []
+    for v in range(skin.num_vertices):
+        for j, w in zip(skin.joints[v], skin.weights[v]):
+            if w <= 0:
+                continue
+            mine = np.flatnonzero(owner == j)
+            heads, tails = sub.parents[1:][mine], np.arange(1, sub.num_joints)[mine]
+            if not len(mine):
+                heads = tails = np.array([hierarchy.original[j]])
+            d = np.maximum(segment_distance(skin.vertices[v], rest[heads], rest[tails]), 1e-6 * sub.height())
+            rows += [v] * len(heads)
+            cols += list(heads)
+            vals += list(w * (1 / d) / np.sum(1 / d))
+    joints, weights = top_influences(np.array(rows), np.array(cols), np.array(vals), skin.num_vertices, 4)
+    fast = reweight(skin, skeleton, hierarchy)
+    def dense(j, w):
+        out = np.zeros((skin.num_vertices, sub.num_joints))
+        np.add.at(out, (np.repeat(np.arange(skin.num_vertices), j.shape[1]), j.ravel()), w.ravel())
+        return out
+
+    np.testing.assert_allclose(dense(fast.joints, fast.weights), dense(joints, weights), atol=1e-12)
