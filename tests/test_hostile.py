@@ -160,7 +160,10 @@ CASES = {
     "skin npz truncated": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _cut(npz(t / "s.npz"))], 2, "skin"),
     "skin npz bad CRC": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _bad_crc(npz(t / "s.npz"))], 2, "skin"),
     "skin glb accessor past its buffer": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", glb_with(
-        t / "s.glb", lambda d: d["accessors"][0].update(count=10**9))], 2, "skin"),
+        t / "s.glb", lambda d: d["accessors"][0].update(count=10**9))], 2, "accessor"),
+    "skin glb negative stride (crashed the process)": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", glb_with(
+        t / "s.glb", lambda d: d["bufferViews"][d["accessors"][0]["bufferView"]].update(byteStride=-64))],
+        2, "accessor"),
     "skin glb SHORT joints": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", glb_with(
         t / "s.glb", _short_joints)], 2, "skin"),
     "skin glb skin index out of range": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", glb_with(

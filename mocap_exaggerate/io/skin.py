@@ -132,9 +132,17 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
                  gl.UNSIGNED_INT: np.uint32}[accessor.componentType]
         item = np.dtype(dtype).itemsize * width
         stride = view.byteStride or item
-        start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
-        raw = np.frombuffer(data, dtype=np.uint8, count=stride * (accessor.count - 1) + item, offset=start)
-        rows = np.lib.stride_tricks.as_strided(raw, shape=(accessor.count, item), strides=(stride, 1))
+        count = accessor.count
+        view_start, offset = view.byteOffset or 0, accessor.byteOffset or 0
+        view_length = view.byteLength or 0
+        # Every number checked before a strided view is made over the buffer: a hostile file
+        # must not make it read outside (a negative stride once crashed the process).
+        if not (isinstance(count, int) and count >= 1 and stride >= item and view_start >= 0 and offset >= 0
+                and offset + stride * (count - 1) + item <= view_length
+                and view_start + view_length <= len(data)):
+            raise InputError(f"accessor {index} does not fit inside its buffer view", source=label)
+        raw = np.frombuffer(data, dtype=np.uint8, count=stride * (count - 1) + item, offset=view_start + offset)
+        rows = np.lib.stride_tricks.as_strided(raw, shape=(count, item), strides=(stride, 1))
         values = np.ascontiguousarray(rows).view(dtype).reshape(accessor.count, width)
         if accessor.normalized and dtype != np.float32:
             values = values / np.iinfo(dtype).max
@@ -209,6 +217,8 @@ def check_skin(skin: Skin, source: str) -> Skin:
                          f"{joints.min() if joints.min() < 0 else joints.max()}", source=source)
     if not np.all(np.isfinite(weights)) or np.any(weights < 0):
         raise InputError("weights must be finite and not negative", source=source)
+    if any(not np.all(np.abs(np.asarray(p, dtype=np.float64)) <= 1e9) for p in skin.bind.values()):
+        raise InputError("bind positions (inverse bind matrices) must be finite numbers", source=source)
     unweighted = np.flatnonzero(weights.sum(axis=1) <= 0)
     if len(unweighted):
         raise InputError(f"{len(unweighted)} vertices (the first: {unweighted[0]}) have no weight", source=source)
