@@ -305,6 +305,7 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
         influences=int(influences),
         trails=trails_path,
         path_file=path_file,
+        protect=(options["config_file"],) if options["config_file"] is not None else (),
     )
     for warning in record.warnings:
         log.warning("%s: %s", record.input, warning)

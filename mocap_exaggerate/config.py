@@ -246,7 +246,7 @@ def _limbs_from_table(table: Any, source: str) -> tuple[tuple[str, tuple[str, ..
 def _weights_from_table(table: Any, source: str) -> tuple[tuple[str, float], ...]:
     if isinstance(table, dict):
         items = list(table.items())
-    elif isinstance(table, (list, tuple)):
+    elif isinstance(table, (list, tuple)) and all(isinstance(i, (list, tuple)) and len(i) == 2 for i in table):
         items = [tuple(item) for item in table]
     else:
         raise ConfigError(f"{source}: extrapolate.weights must be a table of name = weight")

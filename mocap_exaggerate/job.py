@@ -83,8 +83,9 @@ def check_name(name: str) -> str:
         raise ConfigError(f"output name {name!r} must not start with a dot")
     if "\x00" in name or any(ord(c) < 32 for c in name):
         raise ConfigError(f"output name {name!r} has control characters")
-    if len(name.encode("utf-8")) > MAX_NAME:
-        raise ConfigError(f"output name is {len(name.encode('utf-8'))} bytes long; at most {MAX_NAME}")
+    size = len(os.fsencode(name))
+    if size > MAX_NAME:
+        raise ConfigError(f"output name is {size} bytes long; at most {MAX_NAME}")
     return name
 
 
@@ -143,6 +144,7 @@ def convert(
     influences: int = 4,
     trails: str | os.PathLike | None = None,
     path_file: str | os.PathLike | None = None,
+    protect: tuple[str | os.PathLike, ...] = (),
 ) -> JobRecord:
     """Exaggerate one clip and write its output set.
 
@@ -160,6 +162,7 @@ def convert(
     units, influences : the GLB's units (``auto``, ``cm``, ...) and joints per vertex (4 or 8)
     trails : also write every stretch's end-effector paths to this JSON file
     path_file : a trails file with edited paths for the limbs to follow
+    protect : more files that must never be written over (the pipeline file the config came from)
 
     Returns
     -------
@@ -178,7 +181,8 @@ def convert(
     if config is None:
         config = load_preset(preset or DEFAULT_PRESET)
     to_stream = hasattr(output, "write")
-    inputs = [Path(p) for p in (source, path_file, skin) if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
+    inputs = [Path(p) for p in (source, path_file, skin, *protect) if isinstance(p, (str, os.PathLike))
+              and str(p) != "-"]
     data, label = read_source(source, label)
     stem = check_name(name if name is not None else _default_name(source))
     if to_stream:
@@ -188,7 +192,11 @@ def convert(
         if folder.exists() and not folder.is_dir():
             raise ConfigError(f"{folder}: exists and is not a folder")
         targets = output_paths(folder, stem, glb=glb, trails=trails)
-    check_targets(targets, inputs, overwrite)
+    # Outputs of an earlier run with the GLB that this run will not write: they would sit beside
+    # a manifest that does not list them. Refused like any output, removed with overwrite.
+    retired = [] if glb or to_stream else [Path(output) / f"{stem}.glb", Path(output) / f"{stem}.weights.npz"]
+    retired = [path for path in retired if path.exists()]
+    check_targets({**targets, **{f"old {p.suffix}": p for p in retired}}, inputs, overwrite)
     if glb and not to_stream:
         from .io.gltf import unit_scale
 
@@ -209,7 +217,7 @@ def convert(
     result = run(motion, config, paths=paths)
     timings.update(result.timings)
     for target in targets.values():
-        remove_stale_temporaries(target)  # what a killed earlier run of these outputs left
+        remove_stale_temporaries(target, keep=inputs)  # what a killed earlier run of these outputs left
     input_hash = file_digest(data)
     del data  # the input's bytes are not needed past this point; a long clip's are tens of MB
     info = None
@@ -254,7 +262,7 @@ def convert(
                             outputs=listed, reader_warnings=report.warnings, frames_in=motion.num_frames,
                             fps=motion.fps, timings=timings)
             written.add(targets["manifest"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))
-        written.commit(retire_first=targets.get("manifest"))
+        written.commit(retire_first=[targets["manifest"], *retired] if "manifest" in targets else [])
     return JobRecord(
         input=label,
         outputs={kind: path for kind, path in targets.items() if kind in outputs or kind == "manifest"},

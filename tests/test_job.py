@@ -192,3 +192,31 @@ def test_the_next_run_clears_what_a_killed_one_left(sample_clip, tmp_path):
     other.write_bytes(b"not ours")
     convert(sample_clip, tmp_path, FAST, glb=False)
     assert not stale.exists() and other.exists()
+
+
+def test_a_pipeline_file_being_rerun_is_never_written_over(sample_clip, tmp_path):
+    first = convert(sample_clip, tmp_path, FAST, glb=False)
+    pipeline = first.outputs["pipeline"]
+    before = pipeline.read_bytes()
+    with pytest.raises(ConfigError, match="input"):
+        convert(sample_clip, tmp_path, FAST, glb=False, overwrite=True, protect=(pipeline,))
+    assert pipeline.read_bytes() == before
+
+
+def test_an_input_named_like_a_temporary_is_not_cleared_away(sample_clip, tmp_path):
+    clip = tmp_path / ".clip.bvh.mine.tmp"
+    clip.write_bytes(sample_clip.read_bytes())
+    convert(clip, tmp_path, FAST, glb=False, name="clip")
+    assert clip.read_bytes() == sample_clip.read_bytes()
+
+
+def test_outputs_a_run_no_longer_writes_do_not_stay_beside_its_manifest(sample_clip, tmp_path):
+    from mocap_exaggerate.job import check_output_set
+
+    convert(sample_clip, tmp_path, FAST)
+    with pytest.raises(OutputExistsError):
+        convert(sample_clip, tmp_path, FAST, glb=False)  # the old GLB is in the way, as any output would be
+    convert(sample_clip, tmp_path, FAST, glb=False, overwrite=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cmu_09_01_run_daz.bvh", "cmu_09_01_run_daz.json",
+                                                         "cmu_09_01_run_daz.pipeline.toml"]
+    assert check_output_set(tmp_path / "cmu_09_01_run_daz.json") == []

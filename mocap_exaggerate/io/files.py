@@ -73,17 +73,17 @@ class OutputSet:
             raise OSError(error.errno, error.strerror or str(error), str(path)) from None
         return "sha256:" + digest.hexdigest()
 
-    def commit(self, *, retire_first: Path | None = None) -> None:
+    def commit(self, *, retire_first: list[Path] = ()) -> None:
         """Rename every temporary file onto its target, in order.
 
-        retire_first : a target (the manifest) to delete before anything is
-            renamed, so that while the renames run no old manifest can vouch
-            for a half-replaced set.
+        retire_first : files to delete before anything is renamed: the old
+            manifest (so that while the renames run no manifest can vouch for
+            a half-replaced set) and old outputs this set no longer has.
         """
         self.created.clear()
-        if retire_first is not None:
+        for old in retire_first:
             try:
-                os.unlink(retire_first)
+                os.unlink(old)
             except FileNotFoundError:
                 pass
         while self.pending:
@@ -113,7 +113,7 @@ class OutputSet:
         self.abort()
 
 
-def remove_stale_temporaries(path: str | os.PathLike) -> list[Path]:
+def remove_stale_temporaries(path: str | os.PathLike, *, keep: list[Path] = ()) -> list[Path]:
     """Delete temporary files that an interrupted write of ``path`` left beside it; the ones removed.
 
     Only names this module makes (``.<name>.<random>.tmp`` in the same
@@ -124,7 +124,7 @@ def remove_stale_temporaries(path: str | os.PathLike) -> list[Path]:
     removed = []
     if folder.is_dir():
         for stale in folder.glob(f".{glob.escape(path.name)}.*.tmp"):
-            if stale.is_file() and not stale.is_symlink():
+            if stale.is_file() and not stale.is_symlink() and not any(same_file(stale, k) for k in keep):
                 _remove(str(stale))
                 removed.append(stale)
     return removed

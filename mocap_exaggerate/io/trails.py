@@ -46,6 +46,8 @@ def read_trails(path: str | os.PathLike) -> dict[str, tuple[list[int], np.ndarra
             limb = str(trail["limb"])
         except (KeyError, TypeError, ValueError, OverflowError, IndexError):
             raise InputError(f"trail #{number} needs limb, frames and exaggerated points", source=label) from None
+        if not all(0 <= f <= 10**9 for f in frames):
+            raise InputError(f"trail #{number} ({limb}): frames must be frame numbers from 0", source=label)
         if points.shape != (len(frames), 3) or not np.all(np.abs(points) <= 1e9):
             raise InputError(f"trail #{number} ({limb}) has {len(frames)} frames but points of shape {points.shape}; "
                              "expected one finite x, y, z (at most 1e9 in size) per frame", source=label)

@@ -145,7 +145,8 @@ def correct(
         ratio = np.log(target / start) / np.log1p(-delta)
         # A tiny delta needs more iterations than max_iter (or int64) can count: cap before converting.
         needed = np.clip(np.ceil(ratio - 1e-9), 1, max_iter + 1).astype(np.int64)
-        needed += (1.0 - delta) ** needed * start > target  # guard the rounding of the logs
+        # Guard the rounding of the logs, and land clearly under the target, not on it to the last bit.
+        needed += (1.0 - delta) ** needed * start > target * (1.0 - 1e-6)
     steps = np.minimum(needed, max_iter)
     keep = (1.0 - delta) ** steps  # share of each excess left
     xa, vec_a, len_a = x[active], vec[active], length[active]
