@@ -225,8 +225,12 @@ def convert(
     with ThreadPoolExecutor(max_workers=1) as pool, OutputSet(overwrite=True) as written:
         # The GLB is built while the BVH is formatted and written: both spend most of
         # their time in NumPy, which lets go of the GIL, so two cores share the work.
-        building = pool.submit(_timed, _make_glb, motion, result, skin, units, influences) \
-            if glb and not to_stream else None
+        if glb and not to_stream:
+            from .outputs import glb_files
+
+            building = pool.submit(_timed, glb_files, motion, result, skin, units, influences)
+        else:
+            building = None
         tick = time.perf_counter()
         if to_stream:
             for piece in iter_bvh(result.motion):
@@ -289,11 +293,11 @@ def check_output_set(manifest: str | os.PathLike) -> list[str]:
     manifest = Path(manifest)
     try:
         info = json.loads(manifest.read_text(encoding="utf-8"))
-        hashes = info["outputs"]["hashes"]
-        names = {kind: info["outputs"][kind] for kind in hashes}
+        hashes = dict(info["outputs"]["hashes"])
+        names = {kind: str(info["outputs"][kind]) for kind in hashes}
     except FileNotFoundError:
         return [f"{manifest}: no manifest"]
-    except (OSError, ValueError, KeyError, TypeError) as error:
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
         return [f"{manifest}: not a readable manifest ({type(error).__name__})"]
     problems = []
     for kind, digest in hashes.items():
@@ -308,12 +312,6 @@ def check_output_set(manifest: str | os.PathLike) -> list[str]:
         if actual != digest:
             problems.append(f"{path}: not the file the manifest recorded")
     return problems
-
-
-def _make_glb(*args):
-    from .outputs import glb_files
-
-    return glb_files(*args)
 
 
 def _timed(func, *args):
