@@ -18,6 +18,7 @@ from typing import Any
 
 from .errors import ConfigError, check_number
 from .io.bvh import FPS_RANGE
+from .stages.contacts import ContactConfig, TargetSpec
 from .stages.correct import CorrectConfig
 from .stages.extrapolate import ExtrapolateConfig
 from .stages.springs import SpringConfig
@@ -84,6 +85,7 @@ _BLOCKS = {
     "auto_stretch": AutoStretchConfig,
     "subjoints": SubjointConfig,
     "springs": SpringConfig,
+    "contacts": ContactConfig,
     "output": OutputConfig,
 }
 
@@ -99,7 +101,9 @@ class PipelineConfig:
     springs: SpringConfig = field(default_factory=SpringConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
     auto_stretch: AutoStretchConfig = field(default_factory=AutoStretchConfig)
+    contacts: ContactConfig = field(default_factory=ContactConfig)
     stretch: tuple[StretchSpec, ...] = ()
+    target: tuple[TargetSpec, ...] = ()
     limbs: tuple[tuple[str, tuple[str, ...]], ...] = ()
     description: str = ""
 
@@ -121,8 +125,11 @@ class PipelineConfig:
             if key == "limbs":
                 blocks["limbs"] = _limbs_from_table(value, source)
                 continue
+            if key == "target":
+                blocks["target"] = _targets_from_list(value, source)
+                continue
             if key not in _BLOCKS:
-                known = ", ".join(list(_BLOCKS) + ["limbs", "[stretch]"])
+                known = ", ".join(list(_BLOCKS) + ["limbs", "[stretch]", "[target]"])
                 raise ConfigError(f"{source}: unknown block [{key}] (known: {known})")
             if not isinstance(value, dict):
                 raise ConfigError(f"{source}: [{key}] must be a table")
@@ -138,7 +145,7 @@ class PipelineConfig:
             for integer in ("max_iter", "per_link"):
                 if isinstance(values.get(integer), float) and values[integer].is_integer():
                     values[integer] = int(values[integer])
-            for listed in ("groups", "rigid"):
+            for listed in ("groups", "rigid", "joints"):
                 if listed in values and not isinstance(values[listed], (list, tuple)):
                     raise ConfigError(f"{source}: {key}.{listed} must be a list")
             try:
@@ -164,11 +171,15 @@ class PipelineConfig:
             if name == "subjoints":
                 table["groups"] = [list(g) for g in self.subjoints.groups]
                 table["rigid"] = list(self.subjoints.rigid)
+            if name == "contacts":
+                table["joints"] = list(self.contacts.joints)
             out[name] = {k: v for k, v in table.items() if v is not None}
         if self.limbs:
             out["limbs"] = {name: list(chain) for name, chain in self.limbs}
         if self.stretch:
             out["stretch"] = [spec.to_dict() for spec in self.stretch]
+        if self.target:
+            out["target"] = [spec.to_dict() for spec in self.target]
         return out
 
     @classmethod
@@ -229,6 +240,30 @@ def _stretch_from_list(items: Any, source: str) -> tuple[StretchSpec, ...]:
             specs.append(StretchSpec(**values))
         except ConfigError as error:
             raise ConfigError(f"{source}: stretch #{number}: {error}") from None
+    return tuple(specs)
+
+
+def _targets_from_list(items: Any, source: str) -> tuple[TargetSpec, ...]:
+    if not isinstance(items, (list, tuple)):
+        raise ConfigError(f"{source}: target must be a list of tables ([[target]])")
+    specs = []
+    known = {f.name for f in fields(TargetSpec)}
+    for number, item in enumerate(items, start=1):
+        if not isinstance(item, dict):
+            raise ConfigError(f"{source}: target #{number} must be a table")
+        unknown = set(item) - known
+        if unknown:
+            raise ConfigError(f"{source}: target #{number}: unknown key {sorted(unknown)[0]} (known: {', '.join(sorted(known))})")
+        missing = {"joint", "frame"} - set(item)
+        if missing:
+            raise ConfigError(f"{source}: target #{number}: missing {', '.join(sorted(missing))}")
+        values = dict(item)
+        if isinstance(values.get("position"), list):
+            values["position"] = tuple(values["position"])
+        try:
+            specs.append(TargetSpec(**values))
+        except ConfigError as error:
+            raise ConfigError(f"{source}: target #{number}: {error}") from None
     return tuple(specs)
 
 

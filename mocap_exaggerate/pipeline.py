@@ -25,12 +25,13 @@ from .errors import ConfigError
 from .limbs import LIMB_NAMES, find_limbs, limb_joints
 from .motion import Motion
 from .skeleton import Skeleton
+from .stages.contacts import ContactConfig, StretchKey, TargetSpec, constrain
 from .stages.correct import CorrectReport, correct
 from .stages.extrapolate import extrapolate
-from .stages.orient import motion_from_world, recover_orientations
+from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping
-from .stages.subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints
+from .stages.subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints, rubber_groups
 from .tpose import detect_rest_frames
 
 __all__ = [
@@ -68,6 +69,8 @@ class State:
     paths : limb -> (frames, points), hand-edited end-effector paths, or None
     hierarchy : the sub-joint hierarchy, once the subjoints stage has run
     sub_positions : (F, J', 3) positions on the rubber skeleton, once a stage made them
+    pins : original joints ``(k,)`` and weights ``(F, k)`` by which they keep their captured
+        orientation (planted feet), once the constraints stage has run
     output : the output Motion and its world transforms, once orient has run
     findings : per-stage facts for the manifest (correct report, stretch result, substeps)
     notes : things the user should hear about, in the order they happened
@@ -83,6 +86,7 @@ class State:
     paths: dict | None = None
     hierarchy: SubjointHierarchy | None = None
     sub_positions: np.ndarray | None = None
+    pins: tuple[np.ndarray, np.ndarray] | None = None
     output: Output | None = None
     findings: dict[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
@@ -217,10 +221,59 @@ def _springs(state: State, config) -> State:
     return replace(state, sub_positions=out, findings=state.with_findings(spring_substeps=substeps), notes=notes)
 
 
+class ConstraintPlan(NamedTuple):
+    """The constraints stage's settings: contact detection and the floor, and the targets."""
+
+    contacts: ContactConfig
+    targets: tuple[TargetSpec, ...]
+
+
+def _constraints(state: State, plan: ConstraintPlan) -> State:
+    motion, first = state.motion, state.first
+    skeleton = motion.skeleton
+    hierarchy, positions = state.rubber()
+    targets = []
+    for spec in plan.targets:
+        frame = spec.frame_index(motion.frame_time, motion.num_frames)
+        if frame < first:
+            raise ConfigError(f"target {spec.joint}@{spec.frame}: frame {frame} is a rest-pose frame "
+                              f"(motion starts at {first})")
+        targets.append((spec, frame - first))
+    keys = []
+    stretch = state.findings.get("stretch")
+    if stretch is not None:
+        for event in stretch.events:
+            limb = state.limbs[event["limb"]]
+            frame = event["frames"][1] if event["pivot"] == "start" else event["frames"][0]
+            if frame >= first:
+                vectors = stretch.positions[first:, limb.end] - stretch.positions[first:, limb.base]
+                keys.append(StretchKey(event["limb"], limb.base, limb.end, frame - first, vectors))
+    groups = hierarchy.groups or rubber_groups(skeleton, hierarchy.rigid)
+    result = constrain(
+        positions[first:], hierarchy, skeleton, state.limbs, state.captured_pos[first:], state.captured_rot[first:],
+        motion.frame_time, config=plan.contacts, targets=tuple(targets), keys=tuple(keys), groups=groups,
+        incoming=lambda joint: incoming_joint(skeleton, joint),
+    )
+    out = positions.copy()
+    out[first:] = result.positions
+    weights = np.zeros((len(positions), len(result.pin_joints)))
+    weights[first:] = result.pin_weights
+    contacts = {name: [[int(a) + first, int(b) + first] for a, b in runs] for name, runs in result.contacts.items()}
+    report = {"contacts": contacts, "anchor": plan.contacts.anchor if plan.contacts.enabled else None,
+              "targets": [{**spec.to_dict(), "frame": frame + first} for spec, frame in targets],
+              "stretch_keys": [{**key, "frame": key["frame"] + first} for key in result.keys]}
+    if result.ground is not None:
+        report["floor"] = {"axis": "XYZ"[result.ground.axis], "up": "+" if result.ground.sign > 0 else "-",
+                           "height": round(result.ground.sign * result.ground.floor, 6)}
+    return replace(state, sub_positions=out, pins=(result.pin_joints, weights),
+                   findings=state.with_findings(constraints=report))
+
+
 def _orient(state: State, config) -> State:
     motion = state.motion
     hierarchy, positions = state.rubber()
-    sub_rot, sub_pos = recover_orientations(positions, hierarchy, motion, state.captured_rot, state.captured_pos)
+    sub_rot, sub_pos = recover_orientations(positions, hierarchy, motion, state.captured_rot, state.captured_pos,
+                                            state.pins)
     if config.skeleton == "original":
         keep = hierarchy.original
         out_pos, out_rot = sub_pos[:, keep], sub_rot[:, keep]
@@ -251,6 +304,9 @@ STAGES: tuple[Stage, ...] = (
           lambda c: StretchPlan(c.stretch, c.auto_stretch) if c.stretch or c.auto_stretch.enabled else None),
     Stage("subjoints", _subjoints, _block("subjoints")),
     Stage("springs", _springs, lambda c: c.springs if c.springs.enabled and c.springs.blend > 0 else None),
+    Stage("constraints", _constraints,
+          lambda c: ConstraintPlan(c.contacts, c.target)
+          if c.contacts.enabled or c.target or c.stretch or c.auto_stretch.enabled else None),
     Stage("orient", _orient, lambda c: c.output),
 )
 
@@ -287,6 +343,7 @@ class PipelineResult:
     notes: list[str] = field(default_factory=list)
     stretch: StretchResult | None = None
     stages: list[str] = field(default_factory=list)
+    constraints: dict | None = None
 
 
 def prepare(motion: Motion, config: InputConfig | None = None, *, limbs: dict | None = None,
@@ -352,6 +409,7 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
         notes=list(state.notes),
         stretch=state.findings.get("stretch"),
         stages=ran,
+        constraints=state.findings.get("constraints"),
     )
 
 

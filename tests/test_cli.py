@@ -126,7 +126,7 @@ def test_config_file_and_flags(runner, sample_clip, tmp_path):
     info = json.loads((tmp_path / "cmu_09_01_run_daz.json").read_text())
     assert info["config"]["extrapolate"]["omega"] == 4.0
     assert info["config"]["extrapolate"]["weights"] == {"left_arm": 2.0}
-    assert info["stages"] == ["extrapolate", "subjoints", "springs", "orient"]
+    assert info["stages"] == ["extrapolate", "subjoints", "springs", "constraints", "orient"]
     bad = tmp_path / "bad.toml"
     bad.write_text("[correct]\ndelta = 2\n")
     result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "x"), "--config", str(bad)])
@@ -209,7 +209,7 @@ def test_rubber_options_and_original_skeleton(runner, sample_clip, tmp_path):
                                  "--no-springs", "--sublink-length", "3%"])
     assert result.exit_code == 0, result.stderr
     info = json.loads((tmp_path / "c" / "cmu_09_01_run_daz.json").read_text())
-    assert info["stages"] == ["extrapolate", "correct", "orient"]
+    assert info["stages"] == ["extrapolate", "correct", "constraints", "orient"]
 
 
 @pytest.mark.parametrize(

@@ -25,7 +25,7 @@ from ..motion import Motion
 from ..rotations import cross, quat_between, quat_from_matrix, quat_mul, quat_normalize, quat_rotate, quat_slerp
 from .subjoints import SubjointHierarchy
 
-__all__ = ["recover_orientations", "motion_from_world"]
+__all__ = ["recover_orientations", "motion_from_world", "incoming_joint"]
 
 
 def motion_from_world(world_pos, world_rot, skeleton, frame_time, euler_hint=None) -> Motion:
@@ -89,12 +89,19 @@ def _first_above_at_distance(skeleton, joint: int, lengths: np.ndarray) -> int:
     return int(skeleton.parents[current]) if current > 0 else -1
 
 
+def incoming_joint(skeleton, joint: int) -> int:
+    """The joint whose link into ``joint`` turns it when it ends a chain (zero-length links
+    looked through); -1 when there is none."""
+    return _first_above_at_distance(skeleton, joint, _effective_lengths(skeleton))
+
+
 def recover_orientations(
     sub_pos: np.ndarray,
     hierarchy: SubjointHierarchy,
     source: Motion,
     source_rot: np.ndarray,
     source_pos: np.ndarray,
+    pins: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """World orientations ``(F, J', 4)`` of every sub-joint, and positions with rigid branches placed.
 
@@ -102,6 +109,8 @@ def recover_orientations(
     hierarchy : the sub-joint hierarchy of ``source.skeleton``
     source : the captured Motion (its local transforms place rigid branches)
     source_rot, source_pos : (F, J, 4) and (F, J, 3) captured world transforms
+    pins : original joints ``(k,)`` that turn back to their captured orientation by
+        weights ``(F, k)`` (a planted foot keeps its toes down)
     """
     skeleton = source.skeleton
     original = hierarchy.original
@@ -144,6 +153,9 @@ def recover_orientations(
             source_pos[:, single_to] - source_pos[:, single_from], new_pos[:, single_to] - new_pos[:, single_from]
         )
         world[:, single_joint] = quat_normalize(quat_mul(turn, source_rot[:, single_joint]))
+    if pins is not None and len(pins[0]):
+        joints, weights = pins
+        world[:, joints] = quat_slerp(world[:, joints], source_rot[:, joints], weights)
 
     # Rigid branches: captured local transforms under the recovered parent.
     for j in range(1, skeleton.num_joints):

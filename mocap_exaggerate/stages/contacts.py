@@ -1,0 +1,700 @@
+"""Constraint post-processing (Kwon & Lee 2008, section 6): planted feet, hits that land, a floor.
+
+Exaggeration moves end effectors, so feet slide and sink and punches miss.
+This block runs after the last stage that moves positions (the springs) and
+restores the constraints the capture had:
+
+* **Contacts** are found on the captured motion: an end effector (a foot and
+  its toes, a hand and its fingers) that is near the ground and nearly still,
+  with hysteresis and a minimum duration. While in contact it keeps its
+  captured position (``anchor = "captured"``), or its exaggerated position at
+  the contact's first frame plus the captured roll since (``"exaggerated"``,
+  which keeps the bigger stride), and its captured orientation, so toes and
+  heels stay down too.
+* **Targets** (``--target JOINT@FRAME[=x,y,z]``) keep an end effector where it
+  was captured at a frame, or put it at a given point.
+* **Stretch keys**: the length a stretch promised at its final frame, which the
+  springs would otherwise soften.
+* **Floor**: no joint of the output goes below the captured floor; a joint
+  that would is pressed onto it by a smooth (C1) soft clamp, not cut.
+
+Every constraint is a per-frame target and weight for one end effector,
+eased in and out (C2 smootherstep) outside the constrained frames so nothing
+pops. The chain above the end effector (limb base to end, sub-joints
+included) is then deformed to meet it, for all constrained frames at once:
+the discrete Laplacian curve deformation Nealen et al. (2007) describe and the
+paper used, with the base fixed and the end at its target. Each point's
+Laplacian (its offset from the length-weighted mean of its neighbours, i.e.
+the chain's bend) is kept, turned with the chain's local direction, in two
+passes. Without sub-joints (a plain thigh-knee-ankle chain) the chain is
+solved by two-bone IK instead, which keeps both bones' lengths while they can
+reach.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from ..errors import ConfigError, check_flag, check_number
+from ..limbs import Limb
+from ..rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
+from ..skeleton import Skeleton
+from .extrapolate import parse_duration
+
+__all__ = [
+    "ContactConfig",
+    "TargetSpec",
+    "parse_target",
+    "Ground",
+    "find_ground",
+    "Effector",
+    "find_effectors",
+    "detect_contacts",
+    "contact_weights",
+    "laplacian_deform",
+    "two_bone_ik",
+    "soft_floor",
+    "smootherstep",
+]
+
+_ANCHORS = ("captured", "exaggerated")
+#: Named sets of end effectors.
+_SETS = {"feet": ("left_leg", "right_leg"), "hands": ("left_arm", "right_arm")}
+
+
+@dataclass(frozen=True, kw_only=True)
+class ContactConfig:
+    """Settings of the contact block (detection, pinning and the floor).
+
+    joints : end effectors watched for contacts: ``feet``, ``hands``, limb
+        names (``left_leg``) or end-effector joint names
+    anchor : ``captured`` keeps a planted end effector where it was captured;
+        ``exaggerated`` where the exaggerated motion put it on the contact's
+        first frame (horizontally), keeping the bigger stride
+    height : near the ground: within this share of the body height above the
+        lowest level the point itself reaches (points that never come within
+        0.1 of the height of the floor, such as hands in a walk, never touch)
+    speed : nearly still: slower than this many body heights per second
+        (a contact holds while under 1.6 times this and 1.5 times ``height``)
+    min_duration : shorter contacts are ignored (seconds, ``"80ms"`` or ``"10f"``)
+    blend : time to ease into and out of each contact (and a floor press)
+    floor : keep every joint above the captured floor
+    """
+
+    enabled: bool = True
+    joints: tuple[str, ...] = ("feet",)
+    anchor: str = "captured"
+    height: float = 0.04
+    speed: float = 0.3
+    min_duration: str | float = "0.08s"
+    blend: str | float = "0.15s"
+    floor: bool = True
+
+    def __post_init__(self) -> None:
+        check_flag("contacts.enabled", self.enabled)
+        check_flag("contacts.floor", self.floor)
+        if isinstance(self.joints, str) or not all(isinstance(j, str) for j in self.joints):
+            raise ConfigError(f"contacts.joints must be a list of names (feet, hands, limbs or joints), got {self.joints!r}")
+        object.__setattr__(self, "joints", tuple(self.joints))
+        if self.anchor not in _ANCHORS:
+            raise ConfigError(f"contacts.anchor must be one of {', '.join(_ANCHORS)}, got {self.anchor!r}")
+        check_number("contacts.height", self.height, 0, 1)
+        check_number("contacts.speed", self.speed, 0, 100)
+        for name in ("min_duration", "blend"):
+            if parse_duration(getattr(self, name), 1.0, what=f"contacts.{name}") > 10 * 1000:
+                raise ConfigError(f"contacts.{name} must be at most 10 s")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TargetSpec:
+    """An end effector held at a point at one frame (eased in and out over ``window``).
+
+    joint : an end effector's joint name, or a limb name (its end)
+    frame : frame number, or a time such as ``"1.25s"``
+    position : (x, y, z) in the clip's units and axes; None keeps the
+        captured position at that frame (the punch lands where it landed)
+    window : time over which the target eases in before and out after the frame
+    """
+
+    joint: str
+    frame: int | str
+    position: tuple[float, float, float] | None = None
+    window: str | float = "0.25s"
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.joint, str) or not self.joint:
+            raise ConfigError(f"target: joint must be a name, got {self.joint!r}")
+        if self.position is not None:
+            if not isinstance(self.position, (list, tuple)) or len(self.position) != 3:
+                raise ConfigError(f"target {self.joint}: position must be three numbers x,y,z, got {self.position!r}")
+            for axis, value in zip("xyz", self.position):
+                check_number(f"target {self.joint}: {axis}", value, -1e9, 1e9)
+            object.__setattr__(self, "position", tuple(float(v) for v in self.position))
+        if parse_duration(self.window, 1.0, what=f"target {self.joint}: window") > 10 * 1000:
+            raise ConfigError(f"target {self.joint}: window must be at most 10 s")
+        _frame_number(self.frame, 1.0, self.joint)
+
+    def frame_index(self, frame_time: float, num_frames: int) -> int:
+        frame = _frame_number(self.frame, frame_time, self.joint)
+        if not 0 <= frame < num_frames:
+            raise ConfigError(f"target {self.joint}@{self.frame}: frame {frame} is outside the clip (0-{num_frames - 1})")
+        return frame
+
+    def to_dict(self) -> dict:
+        out = {"joint": self.joint, "frame": self.frame, "window": self.window}
+        if self.position is not None:
+            out["position"] = list(self.position)
+        return out
+
+
+def _frame_number(value: int | str, frame_time: float, joint: str) -> int:
+    if isinstance(value, bool):
+        raise ConfigError(f"target {joint}: frame must be a frame number or a time, got {value!r}")
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    text = str(value).strip()
+    if re.fullmatch(r"\d+", text):
+        return int(text)
+    if not re.search(r"(s|ms|f|frames?)$", text):
+        raise ConfigError(f"target {joint}: frame must be a frame number or a time such as 1.2s, got {value!r}")
+    return int(round(parse_duration(text, frame_time, what=f"target {joint}: frame")))
+
+
+_TARGET = re.compile(r"^\s*([^@=\s]+)\s*@\s*([^=]+?)\s*(?:=\s*(.*))?$")
+
+
+def parse_target(text: str) -> TargetSpec:
+    """A target from the command line: ``JOINT@FRAME`` or ``JOINT@FRAME=x,y,z``.
+
+    >>> parse_target("RightHand@1251=10,150,40").position
+    (10.0, 150.0, 40.0)
+    """
+    match = _TARGET.match(text)
+    if not match:
+        raise ConfigError(f"target {text!r}: expected JOINT@FRAME or JOINT@FRAME=x,y,z, e.g. RightHand@1251")
+    joint, frame, point = match.groups()
+    position = None
+    if point is not None:
+        parts = [p.strip() for p in point.split(",")]
+        try:
+            position = tuple(float(p) for p in parts)
+        except ValueError:
+            raise ConfigError(f"target {text!r}: {point!r} is not three numbers x,y,z") from None
+        if len(position) != 3 or not all(np.isfinite(position)):
+            raise ConfigError(f"target {text!r}: {point!r} is not three finite numbers x,y,z")
+    return TargetSpec(joint=joint, frame=frame, position=position)
+
+
+# ---------------------------------------------------------------------------- the ground
+
+
+class Ground(NamedTuple):
+    """Which way is up and where the floor is.
+
+    axis : index of the up axis; sign : +1 or -1 (which way along it is up)
+    floor : the lowest height any captured joint reaches (in ``sign * coordinate``)
+    height : the body height, the length scale of every threshold
+    """
+
+    axis: int
+    sign: float
+    floor: float
+    height: float
+
+    def heights(self, positions: np.ndarray) -> np.ndarray:
+        return self.sign * positions[..., self.axis]
+
+    def up(self) -> np.ndarray:
+        vector = np.zeros(3)
+        vector[self.axis] = self.sign
+        return vector
+
+
+def find_ground(skeleton: Skeleton, captured_pos: np.ndarray, limbs: dict[str, Limb] | None = None) -> Ground:
+    """The up axis of the rest pose, its sign from the captured body, and the captured floor.
+
+    captured_pos : (F, J, 3) float64 captured world positions (motion frames only)
+    limbs : found limbs; up is from the feet toward the head (without them: from the
+        lowest joints toward the root, which sits low in a body)
+    """
+    axis = skeleton.up_axis()
+    heights = captured_pos[..., axis]
+    limbs = limbs or {}
+    feet = [limbs[name].end for name in ("left_leg", "right_leg") if name in limbs]
+    top = [limbs[name].end for name in ("neck", "spine") if name in limbs][:1]
+    if feet and top:
+        sign = 1.0 if np.mean(heights[:, top]) >= np.mean(heights[:, feet]) else -1.0
+    else:
+        root = float(np.mean(heights[:, 0]))
+        lowest = float(np.mean(heights.min(axis=1)))
+        highest = float(np.mean(heights.max(axis=1)))
+        sign = 1.0 if root - lowest <= highest - root else -1.0
+    floor = float((sign * heights).min()) if heights.size else 0.0
+    return Ground(axis, sign, floor, skeleton.height())
+
+
+def soft_floor(heights: np.ndarray, floor: float, margin: float) -> np.ndarray:
+    """Heights pressed onto the floor smoothly: unchanged above it, never ``margin`` below it.
+
+    Below the floor ``h -> floor - margin (1 - exp((h - floor) / margin))``: the
+    same value and slope at the floor (C1), so a joint sliding under it keeps
+    moving smoothly and flattens out just under the surface.
+    """
+    below = heights < floor
+    out = np.array(heights, dtype=np.float64)
+    out[below] = floor - margin * (1.0 - np.exp((heights[below] - floor) / margin))
+    return out
+
+
+# ---------------------------------------------------------------------------- end effectors
+
+
+@dataclass(frozen=True)
+class Effector:
+    """An end effector and the chain that bends to move it.
+
+    joint : the end joint; chain : original joints from the fixed base to ``joint``
+    riders : joints that ride rigidly on it (toes, fingers)
+    points : the joint and the riders with a link of their own: where it can touch
+    """
+
+    joint: int
+    chain: tuple[int, ...]
+    riders: tuple[int, ...] = field(default=())
+    points: tuple[int, ...] = field(default=())
+
+
+def find_effectors(skeleton: Skeleton, limbs: dict[str, Limb], rigid: np.ndarray,
+                   groups: tuple[tuple[int, ...], ...] = ()) -> dict[int, Effector]:
+    """Every end effector the block can move, keyed by joint.
+
+    A limb's end (hands, feet, the head) bends its limb's chain from the
+    limb's base; the end of any other rubber group bends that group.
+    ``rigid`` (J,) marks the branches that ride rigidly (their joints are the
+    end's riders).
+    """
+    out: dict[int, Effector] = {}
+    lengths = skeleton.link_lengths()
+    height = skeleton.height()
+
+    def effector(chain) -> Effector | None:
+        end = int(chain[-1])
+        below = skeleton.descendants(end)[1:]
+        if rigid[end] or not all(rigid[below]):
+            return None  # something that bends hangs below: not an end
+        riders = tuple(int(j) for j in below)
+        points = (end,) + tuple(j for j in riders if lengths[j] > 1e-3 * height)
+        return Effector(end, tuple(int(j) for j in chain), riders, points)
+
+    for chain in list(groups) + [limb.joints for limb in limbs.values()]:
+        if len(chain) >= 2 and (found := effector(chain)) is not None:
+            out[found.joint] = found  # a limb's chain (from its base) wins over its group's
+    return out
+
+
+def resolve_effector(name: str, skeleton: Skeleton, limbs: dict[str, Limb], effectors: dict[int, Effector],
+                     what: str) -> list[int]:
+    """End-effector joints for a name: ``feet``, ``hands``, a limb or a joint; ConfigError otherwise."""
+    if name in _SETS:
+        return [limbs[limb].end for limb in _SETS[name] if limb in limbs and limbs[limb].end in effectors]
+    if name in limbs:
+        if limbs[name].end not in effectors:
+            raise ConfigError(f"{what}: the end of {name} cannot be moved (it rides rigidly)")
+        return [limbs[name].end]
+    if name not in skeleton.names:
+        raise ConfigError(f"{what}: no joint or limb named {name!r} (limbs: {', '.join(limbs) or 'none found'})")
+    joint = skeleton.index(name)
+    if joint not in effectors:
+        names = ", ".join(skeleton.names[j] for j in sorted(effectors)) or "none"
+        raise ConfigError(f"{what}: {name} is not an end effector (end effectors: {names})")
+    return [joint]
+
+
+# ---------------------------------------------------------------------------- detection
+
+
+def _runs(mask: np.ndarray) -> np.ndarray:
+    """Inclusive ``(start, end)`` rows of the runs of True in a 1-D mask, ``(R, 2)``."""
+    padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    edges = np.diff(padded)
+    return np.stack([np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1], axis=1)
+
+
+def _mask_from_runs(runs: np.ndarray, length: int) -> np.ndarray:
+    marks = np.zeros(length + 1, np.int64)
+    np.add.at(marks, runs[:, 0], 1)
+    np.add.at(marks, runs[:, 1] + 1, -1)
+    return np.cumsum(marks[:-1]) > 0
+
+
+def _speed(points: np.ndarray, frame_time: float) -> np.ndarray:
+    """Speed ``(F, P)`` of points ``(F, P, 3)`` by central differences over a light smoothing."""
+    from .extrapolate import gaussian_average
+
+    smooth = gaussian_average(points, max(0.02 / frame_time, 0.5))
+    velocity = np.gradient(smooth, frame_time, axis=0) if len(points) > 1 else np.zeros_like(points)
+    return np.linalg.norm(velocity, axis=-1)
+
+
+def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground, frame_time: float,
+                    config: ContactConfig) -> np.ndarray:
+    """Inclusive ``(start, end)`` frame ranges ``(R, 2)`` in which the effector touches the ground.
+
+    A point of the effector (its joint or a rider with a link of its own)
+    touches when it is within ``config.height`` of its own lowest level and
+    slower than ``config.speed``; a contact holds while it stays within 1.5
+    times that height and 1.6 times that speed, and lasts at least
+    ``config.min_duration`` (unless the clip's first or last frame cuts it
+    short). The effector touches when any point does.
+    """
+    frames = captured_pos.shape[0]
+    if frames < 3:
+        return np.zeros((0, 2), np.int64)
+    h = ground.height
+    points = list(effector.points)
+    pos = captured_pos[:, points]
+    height = ground.heights(pos) - ground.floor
+    own = np.percentile(height, 2.0, axis=0)
+    reaches = own < 0.1 * h
+    above = height - own
+    speed = _speed(pos, frame_time) / h
+    strict = (above < config.height * h) & (speed < config.speed) & reaches
+    loose = (above < 1.5 * config.height * h) & (speed < 1.6 * config.speed) & reaches
+    touch = np.zeros(frames, bool)
+    for p in range(len(points)):
+        runs = _runs(loose[:, p])
+        if not len(runs):
+            continue
+        inside = np.cumsum(np.concatenate([[0], strict[:, p].astype(np.int64)]))
+        has_strict = inside[runs[:, 1] + 1] - inside[runs[:, 0]]
+        touch |= _mask_from_runs(runs[has_strict > 0], frames)
+    runs = _runs(touch)
+    shortest = max(1, int(round(parse_duration(config.min_duration, frame_time, what="contacts.min_duration"))))
+    # A contact cut off by the clip's first or last frame may have lasted longer than we see.
+    cut = (runs[:, 0] == 0) | (runs[:, 1] == frames - 1)
+    return runs[(runs[:, 1] - runs[:, 0] + 1 >= np.where(cut, min(shortest, 2), shortest))]
+
+
+def smootherstep(x: np.ndarray) -> np.ndarray:
+    """``6x^5 - 15x^4 + 10x^3`` on [0, 1]: zero first and second derivatives at both ends."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * x * (x * (6.0 * x - 15.0) + 10.0)
+
+
+def contact_weights(runs: np.ndarray, frames: int, ramp: float) -> np.ndarray:
+    """Weight ``(F,)``: 1 inside the runs, easing to 0 over ``ramp`` frames outside them."""
+    weight = np.zeros(frames)
+    if not len(runs):
+        return weight
+    mask = _mask_from_runs(runs, frames)
+    index = np.arange(frames, dtype=np.float64)
+    last = np.maximum.accumulate(np.where(mask, index, -np.inf))
+    following = np.minimum.accumulate(np.where(mask, index, np.inf)[::-1])[::-1]
+    distance = np.minimum(index - last, following - index)
+    if ramp <= 0:
+        return (distance == 0).astype(np.float64)
+    return smootherstep(1.0 - distance / (ramp + 1.0))
+
+
+def anchored_targets(captured: np.ndarray, current: np.ndarray, runs: np.ndarray, ground: Ground) -> np.ndarray:
+    """Targets ``(F, 3)`` for ``anchor = "exaggerated"``: the captured path moved, in each contact,
+    by the horizontal offset of the exaggerated position on its first frame; the offset
+    slides linearly from one contact's to the next between them."""
+    offsets = current[runs[:, 0]] - captured[runs[:, 0]]
+    offsets[:, ground.axis] = 0.0
+    knots = runs.astype(np.float64).reshape(-1)
+    values = np.repeat(offsets, 2, axis=0)
+    index = np.arange(len(captured), dtype=np.float64)
+    shift = np.stack([np.interp(index, knots, values[:, k]) for k in range(3)], axis=1)
+    return captured + shift
+
+
+# ---------------------------------------------------------------------------- deformation
+
+
+def _laplacian_system(rest: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Neighbour weights ``a, b (n-2,)`` of each interior point and the inverse ``(n-2, n-2)`` of
+    the interior system ``x_i - a_i x_{i-1} - b_i x_{i+1} = delta_i``.
+
+    rest : (n,) rest length of the segment ending at each point (rest[0] unused). The
+    weights are by length (``a_i = l_{i+1} / (l_i + l_{i+1})``), so a chain whose
+    Laplacians are all zero is spread in proportion to its rest lengths.
+    """
+    before, after = rest[1:-1], rest[2:]
+    total = before + after
+    a = np.divide(after, total, out=np.full_like(total, 0.5), where=total > 0)
+    b = 1.0 - a
+    n = len(rest) - 2
+    system = np.eye(n)
+    if n > 1:
+        system[np.arange(1, n), np.arange(n - 1)] = -a[1:]
+        system[np.arange(n - 1), np.arange(1, n)] = -b[:-1]
+    return a, b, np.linalg.inv(system)
+
+
+def laplacian_deform(points: np.ndarray, end: np.ndarray, rest: np.ndarray, *, turn: bool = True) -> np.ndarray:
+    """Move a chain's last point to ``end`` keeping its first point and its shape.
+
+    points : (F, n, 3) float64 chain positions, base first
+    end : (F, 3) float64 where the last point must go
+    rest : (n,) rest length of the segment ending at each point
+
+    The discrete Laplacian curve deformation (Nealen et al. 2007, used by Kwon
+    & Lee for their section 6): with both ends fixed, the interior points solve
+    ``L x = delta``, where ``delta`` are the chain's own Laplacians (its bends).
+    With ``turn``, the Laplacians are first turned by the rotation that carries
+    the chain's base-to-end chord onto the new one, so a bend (a knee) turns with
+    the limb instead of shearing; the turn fades out as the new chord shrinks
+    below a third of the chain's rest length or nears a half turn, where its
+    direction means nothing. The system's matrix is the same for every frame:
+    it is inverted once and applied to all frames together. Returns (F, n, 3).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    n = points.shape[1]
+    out = points.copy()
+    out[:, -1] = end
+    if n < 3:
+        return out
+    rest = np.asarray(rest, dtype=np.float64)
+    a, b, inverse = _laplacian_system(rest)
+    delta = points[:, 1:-1] - a[:, None] * points[:, :-2] - b[:, None] * points[:, 2:]
+    if turn:
+        old = points[:, -1] - points[:, 0]
+        new = out[:, -1] - out[:, 0]
+        rotation = quat_between(old, new)
+        length = np.linalg.norm(new, axis=-1)
+        cosine = np.sum(old * new, axis=-1) / np.maximum(np.linalg.norm(old, axis=-1) * length, 1e-300)
+        fade = smootherstep(3.0 * length / max(rest[1:].sum(), 1e-300)) * smootherstep((cosine + 1.0) / 0.3)
+        identity = np.zeros_like(rotation)
+        identity[:, 3] = 1.0
+        delta = quat_rotate(quat_slerp(identity, rotation, fade)[:, None], delta)
+    rhs = delta
+    rhs[:, 0] += a[0] * out[:, 0]
+    rhs[:, -1] += b[-1] * out[:, -1]
+    out[:, 1:-1] = np.einsum("ij,fjk->fik", inverse, rhs)
+    return out
+
+
+def two_bone_ik(base: np.ndarray, middle: np.ndarray, end: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The middle joint ``(F, 3)`` that lets a two-bone chain reach ``target`` (its end goes there).
+
+    Both bones keep their current lengths while the target is within reach,
+    bending in the plane the chain bends in now; past reach (or closer than
+    the bones can fold) both bones scale together, as rubber would.
+    """
+    upper = np.linalg.norm(middle - base, axis=-1)
+    lower = np.linalg.norm(end - middle, axis=-1)
+    reach = target - base
+    distance = np.linalg.norm(reach, axis=-1)
+    tiny = 1e-12
+    direction = reach / np.maximum(distance, tiny)[:, None]
+    # The bend's side: the middle joint's offset from the base-end line, now.
+    now = end - base
+    now_dir = now / np.maximum(np.linalg.norm(now, axis=-1), tiny)[:, None]
+    turn = quat_between(now_dir, direction)
+    side = quat_rotate(turn, middle - base)
+    side = side - np.sum(side * direction, axis=-1, keepdims=True) * direction
+    side_len = np.linalg.norm(side, axis=-1)
+    fallback = np.cross(direction, np.eye(3)[np.argmin(np.abs(direction), axis=-1)])
+    side = np.where((side_len > tiny)[:, None], side, fallback)
+    side /= np.maximum(np.linalg.norm(side, axis=-1), tiny)[:, None]
+    # Scale both bones when the target is out of reach (or inside the fold).
+    scale = np.ones_like(distance)
+    longest = upper + lower
+    shortest = np.abs(upper - lower)
+    far = distance > longest
+    scale[far] = distance[far] / np.maximum(longest[far], tiny)
+    near = distance < shortest
+    scale[near] = distance[near] / np.maximum(shortest[near], tiny)
+    upper, lower = upper * scale, lower * scale
+    along = np.divide(distance**2 + upper**2 - lower**2, 2 * distance, out=np.zeros_like(distance),
+                      where=distance > tiny)
+    across = np.sqrt(np.maximum(upper**2 - along**2, 0.0))
+    return base + along[:, None] * direction + across[:, None] * side
+
+
+# ---------------------------------------------------------------------------- the block
+
+
+class StretchKey(NamedTuple):
+    """A stretch's promise: at ``frame`` the limb's end lies at ``vectors[frame]`` from its base.
+
+    vectors : (F, 3) float64 end minus base as the stretch pass left them (eased toward around the frame)
+    """
+
+    limb: str
+    base: int
+    end: int
+    frame: int
+    vectors: np.ndarray
+
+
+class ConstraintResult(NamedTuple):
+    """What the block did.
+
+    positions : (F, J', 3) float64 positions on the rubber hierarchy
+    pin_joints : (k,) int original joints that keep their captured orientation by ``pin_weights (F, k)``
+    contacts : joint name -> inclusive (start, end) frame ranges found
+    ground : the up axis and floor used (None when contacts were off)
+    keys : per stretch key, the length reached over the length promised
+    """
+
+    positions: np.ndarray
+    pin_joints: np.ndarray
+    pin_weights: np.ndarray
+    contacts: dict[str, list[list[int]]]
+    ground: Ground | None
+    keys: list[dict]
+
+
+def sub_chain(hierarchy, chain: tuple[int, ...]) -> np.ndarray:
+    """Indices in the rubber hierarchy of an original chain and the sub-joints between its joints."""
+    out = [int(hierarchy.original[chain[0]])]
+    between = ~hierarchy.is_original
+    for child in chain[1:]:
+        out.extend(int(j) for j in np.flatnonzero(between & (hierarchy.link_child == child)))
+        out.append(int(hierarchy.original[child]))
+    return np.array(out)
+
+
+def constrain(
+    sub_pos: np.ndarray,
+    hierarchy,
+    skeleton: Skeleton,
+    limbs: dict[str, Limb],
+    captured_pos: np.ndarray,
+    captured_rot: np.ndarray,
+    frame_time: float,
+    *,
+    config: ContactConfig,
+    targets: tuple[tuple[TargetSpec, int], ...] = (),
+    keys: tuple[StretchKey, ...] = (),
+    groups: tuple[tuple[int, ...], ...] = (),
+    incoming=None,
+) -> ConstraintResult:
+    """Restore contacts, targets, stretch keys and the floor on rubber positions.
+
+    sub_pos : (F, J', 3) float64 positions on ``hierarchy`` (motion frames only)
+    hierarchy, skeleton : the rubber hierarchy and the original skeleton it was cut from
+    captured_pos, captured_rot : (F, J, 3), (F, J, 4) captured world transforms of the original joints
+    targets : (spec, frame) pairs, frames counted in ``sub_pos``
+    keys : stretch keys, frames counted in ``sub_pos``
+    groups : rubber groups of original joints (their ends are end effectors too)
+    incoming : ``joint -> joint`` whose link turns an end effector (as orientation recovery does)
+    """
+    out = np.array(sub_pos, dtype=np.float64)
+    frames = out.shape[0]
+    effectors = find_effectors(skeleton, limbs, hierarchy.rigid, groups)
+    original = hierarchy.original
+    rest = hierarchy.skeleton.link_lengths()
+    ramp = parse_duration(config.blend, frame_time, what="contacts.blend")
+    goals: dict[int, np.ndarray] = {}
+
+    def goal(joint: int) -> np.ndarray:
+        if joint not in goals:
+            goals[joint] = out[:, original[joint]].copy()
+        return goals[joint]
+
+    pins: dict[int, np.ndarray] = {}
+    found: dict[str, list[list[int]]] = {}
+    ground = None
+    if config.enabled:
+        ground = find_ground(skeleton, captured_pos, limbs)
+        watched: list[int] = []
+        for name in config.joints:
+            for joint in resolve_effector(name, skeleton, limbs, effectors, "contacts.joints"):
+                if joint not in watched:
+                    watched.append(joint)
+        for joint in watched:
+            runs = detect_contacts(captured_pos, effectors[joint], ground, frame_time, config)
+            found[skeleton.names[joint]] = runs.tolist()
+            if not len(runs):
+                continue
+            weight = contact_weights(runs, frames, ramp)
+            if config.anchor == "captured":
+                target = captured_pos[:, joint]
+            else:
+                target = anchored_targets(captured_pos[:, joint], out[:, original[joint]], runs, ground)
+            g = goal(joint)
+            g += weight[:, None] * (target - g)
+            pins[joint] = weight
+    for spec, frame in targets:
+        for joint in resolve_effector(spec.joint, skeleton, limbs, effectors, f"target {spec.joint}@{spec.frame}"):
+            window = parse_duration(spec.window, frame_time, what=f"target {spec.joint}: window")
+            weight = contact_weights(np.array([[frame, frame]]), frames, window)
+            point = captured_pos[frame, joint] if spec.position is None else np.asarray(spec.position)
+            g = goal(joint)
+            g += weight[:, None] * (point - g)
+    for key in keys:
+        if key.end not in effectors:
+            continue
+        weight = contact_weights(np.array([[key.frame, key.frame]]), frames, ramp)
+        g = goal(key.end)
+        g += weight[:, None] * (out[:, original[key.base]] + key.vectors - g)
+    for joint, g in goals.items():
+        _move_end(out, hierarchy, effectors[joint], g, rest)
+
+    if config.enabled and config.floor:
+        margin = 0.005 * ground.height
+        up = ground.up()
+        for joint, effector in effectors.items():
+            points = _effector_points(out, hierarchy, effector, captured_pos, captured_rot, incoming,
+                                      pins.get(joint))
+            lowest = ground.heights(points).min(axis=1)
+            lift = soft_floor(lowest, ground.floor, margin) - lowest
+            if np.any(lift > 0):
+                _move_end(out, hierarchy, effector, out[:, original[joint]] + lift[:, None] * up, rest)
+        moving = ~hierarchy.rigid[hierarchy.link_child]
+        heights = ground.heights(out[:, moving])
+        out[:, moving, ground.axis] = ground.sign * soft_floor(heights, ground.floor, margin)
+
+    held = []
+    for key in keys:
+        reached = np.linalg.norm(out[key.frame, original[key.end]] - out[key.frame, original[key.base]])
+        promised = np.linalg.norm(key.vectors[key.frame])
+        held.append({"limb": key.limb, "frame": key.frame,
+                     "ratio": round(float(reached / promised), 6) if promised > 0 else 1.0})
+    pin_joints = np.array(sorted(pins), dtype=np.int64)
+    pin_weights = np.stack([pins[j] for j in pin_joints], axis=1) if len(pin_joints) else np.zeros((frames, 0))
+    return ConstraintResult(out, pin_joints, pin_weights, found, ground, held)
+
+
+def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, rest: np.ndarray) -> None:
+    """Deform the effector's chain (in place) on the frames where its end must move."""
+    chain = sub_chain(hierarchy, effector.chain)
+    end = out[:, chain[-1]]
+    moved = np.flatnonzero(np.any(np.abs(goal - end) > 0, axis=-1))
+    if not len(moved):
+        return
+    points = out[moved][:, chain]
+    if len(chain) == 3:
+        middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[moved])
+        new = np.stack([points[:, 0], middle, goal[moved]], axis=1)
+    else:
+        new = laplacian_deform(points, goal[moved], rest[chain])
+    out[moved[:, None], chain[None, :]] = new
+
+
+def _effector_points(out, hierarchy, effector: Effector, captured_pos, captured_rot, incoming, pin) -> np.ndarray:
+    """Where the effector's joint and riders will be ``(F, P, 3)``, turned as orientation recovery will turn it."""
+    joint = effector.joint
+    position = out[:, hierarchy.original[joint]]
+    if len(effector.points) == 1:
+        return position[:, None]
+    above = incoming(joint) if incoming is not None else -1
+    rotation = captured_rot[:, joint]
+    if above >= 0:
+        turn = quat_between(captured_pos[:, joint] - captured_pos[:, above],
+                            position - out[:, hierarchy.original[above]])
+        rotation = quat_mul(turn, rotation)
+    if pin is not None:
+        rotation = quat_slerp(rotation, captured_rot[:, joint], pin)
+    riders = list(effector.points[1:])
+    local = quat_rotate(quat_inv(captured_rot[:, joint])[:, None], captured_pos[:, riders] - captured_pos[:, joint:joint + 1])
+    return np.concatenate([position[:, None], position[:, None] + quat_rotate(rotation[:, None], local)], axis=1)
