@@ -438,7 +438,7 @@ def _laplacian_system(rest: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return a, b, np.linalg.inv(system)
 
 
-def laplacian_deform(points: np.ndarray, end: np.ndarray, rest: np.ndarray, *, turn: bool = True) -> np.ndarray:
+def laplacian_deform(points: np.ndarray, end: np.ndarray, rest: np.ndarray, *, turn: bool = False) -> np.ndarray:
     """Move a chain's last point to ``end`` keeping its first point and its shape.
 
     points : (F, n, 3) float64 chain positions, base first
@@ -450,10 +450,15 @@ def laplacian_deform(points: np.ndarray, end: np.ndarray, rest: np.ndarray, *, t
     ``L x = delta``, where ``delta`` are the chain's own Laplacians (its bends).
     With ``turn``, the Laplacians are first turned by the rotation that carries
     the chain's base-to-end chord onto the new one, so a bend (a knee) turns with
-    the limb instead of shearing; the turn fades out as the new chord shrinks
-    below a third of the chain's rest length or nears a half turn, where its
-    direction means nothing. The system's matrix is the same for every frame:
-    it is inverted once and applied to all frames together. Returns (F, n, 3).
+    the limb instead of shearing; the turn fades out as either chord shrinks
+    below half the chain's rest length or the turn nears a half turn, where its
+    direction means nothing. The block does not turn them: on exaggerated
+    limbs that fold through themselves (looney jumps) the chord swings half a
+    turn in a few frames and the turned bend whips the knee around (7x the
+    largest acceleration), while the plain solve moves every point by a
+    length-weighted share of the end's move, so it is as smooth in time as its
+    input. The system's matrix is the same for every frame: it is inverted
+    once and applied to all frames together. Returns (F, n, 3).
     """
     points = np.asarray(points, dtype=np.float64)
     n = points.shape[1]
@@ -468,9 +473,11 @@ def laplacian_deform(points: np.ndarray, end: np.ndarray, rest: np.ndarray, *, t
         old = points[:, -1] - points[:, 0]
         new = out[:, -1] - out[:, 0]
         rotation = quat_between(old, new)
-        length = np.linalg.norm(new, axis=-1)
-        cosine = np.sum(old * new, axis=-1) / np.maximum(np.linalg.norm(old, axis=-1) * length, 1e-300)
-        fade = smootherstep(3.0 * length / max(rest[1:].sum(), 1e-300)) * smootherstep((cosine + 1.0) / 0.3)
+        old_length, new_length = np.linalg.norm(old, axis=-1), np.linalg.norm(new, axis=-1)
+        cosine = np.sum(old * new, axis=-1) / np.maximum(old_length * new_length, 1e-300)
+        reach = max(rest[1:].sum(), 1e-300)
+        fade = (smootherstep(4.0 * np.minimum(old_length, new_length) / reach - 1.0)
+                * smootherstep((cosine + 1.0) / 0.5))
         identity = np.zeros_like(rotation)
         identity[:, 3] = 1.0
         delta = quat_rotate(quat_slerp(identity, rotation, fade)[:, None], delta)
@@ -644,11 +651,14 @@ def constrain(
         margin = 0.005 * ground.height
         up = ground.up()
         for joint, effector in effectors.items():
-            points = _effector_points(out, hierarchy, effector, captured_pos, captured_rot, incoming,
-                                      pins.get(joint))
-            lowest = ground.heights(points).min(axis=1)
-            lift = soft_floor(lowest, ground.floor, margin) - lowest
-            if np.any(lift > 0):
+            # Lifting the end turns it (its incoming link moves), which moves its toes: a few rounds.
+            for _ in range(4):
+                points = _effector_points(out, hierarchy, effector, captured_pos, captured_rot, incoming,
+                                          pins.get(joint))
+                lowest = ground.heights(points).min(axis=1)
+                lift = soft_floor(lowest, ground.floor, margin) - lowest
+                if not np.any(lift > 1e-6 * ground.height):
+                    break
                 _move_end(out, hierarchy, effector, out[:, original[joint]] + lift[:, None] * up, rest)
         moving = ~hierarchy.rigid[hierarchy.link_child]
         heights = ground.heights(out[:, moving])
@@ -669,16 +679,16 @@ def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, 
     """Deform the effector's chain (in place) on the frames where its end must move."""
     chain = sub_chain(hierarchy, effector.chain)
     end = out[:, chain[-1]]
-    moved = np.flatnonzero(np.any(np.abs(goal - end) > 0, axis=-1))
-    if not len(moved):
+    frames = np.flatnonzero(np.any(np.abs(goal - end) > 0, axis=-1))
+    if not len(frames):
         return
-    points = out[moved][:, chain]
+    points = out[frames][:, chain]
     if len(chain) == 3:
-        middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[moved])
-        new = np.stack([points[:, 0], middle, goal[moved]], axis=1)
+        middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[frames])
+        new = np.stack([points[:, 0], middle, goal[frames]], axis=1)
     else:
-        new = laplacian_deform(points, goal[moved], rest[chain])
-    out[moved[:, None], chain[None, :]] = new
+        new = laplacian_deform(points, goal[frames], rest[chain])
+    out[frames[:, None], chain[None, :]] = new
 
 
 def _effector_points(out, hierarchy, effector: Effector, captured_pos, captured_rot, incoming, pin) -> np.ndarray:
