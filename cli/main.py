@@ -21,6 +21,7 @@ from mocap_exaggerate import __version__
 from mocap_exaggerate.config import DEFAULT_PRESET, preset_description, preset_names, read_config_text, resolve_config
 from mocap_exaggerate.errors import MocapError
 from mocap_exaggerate.io.files import OutputExistsError
+from mocap_exaggerate.stages.contacts import parse_target
 from mocap_exaggerate.stages.stretch import parse_stretch
 
 log = logging.getLogger("mocap_exaggerate")
@@ -59,6 +60,13 @@ def _fail_cleanly(func: Callable) -> Callable:
 def _parse_stretches(ctx, param, values: tuple[str, ...]):
     try:
         return tuple(parse_stretch(v) for v in values)
+    except MocapError as error:
+        raise click.BadParameter(str(error)) from None
+
+
+def _parse_targets(ctx, param, values: tuple[str, ...]):
+    try:
+        return tuple(parse_target(v) for v in values)
     except MocapError as error:
         raise click.BadParameter(str(error)) from None
 
@@ -126,6 +134,17 @@ def pipeline_options(func: Callable) -> Callable:
                           "Repeatable; adds to the config's [[stretch]] list."),
         click.option("--auto-stretch/--no-auto-stretch", "auto_stretch_on", default=None,
                      help="Find strikes (punches, kicks, throws, leaps) and stretch them by the style's scale."),
+        click.option("--contacts", "contacts_mode", type=click.Choice(["auto", "off"]), default=None,
+                     help="Feet (or the joints in [contacts]) that touch the ground in the capture stay planted "
+                          "there, and no joint goes below the captured floor (auto); off leaves them as exaggerated."),
+        click.option("--anchor", type=click.Choice(["captured", "exaggerated"]), default=None,
+                     help="Where a planted foot stays: where it was captured, or where the exaggeration put it "
+                          "when it landed (keeps the bigger stride)."),
+        click.option("--floor/--no-floor", "floor_on", default=None,
+                     help="Keep every joint above the captured floor (with --contacts auto)."),
+        click.option("--target", "targets", multiple=True, callback=_parse_targets, metavar="JOINT@FRAME[=X,Y,Z]",
+                     help="Hold an end effector (a joint, or a limb: right_arm) where it was captured at FRAME "
+                          "(or at X,Y,Z), eased in and out over 0.25 s. Frames or 1.2s. Repeatable."),
         click.option("--tpose", type=click.Choice(["auto", "keep", "drop"]), default=None,
                      help="Leading synthetic rest pose: auto (keep out of filters, unchanged), keep, drop."),
         click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time."),
@@ -138,7 +157,7 @@ def pipeline_options(func: Callable) -> Callable:
 def _overrides(p: dict[str, Any]) -> dict[str, Any]:
     table: dict[str, dict[str, Any]] = {
         "input": {}, "extrapolate": {}, "correct": {}, "subjoints": {}, "springs": {}, "output": {},
-        "auto_stretch": {},
+        "auto_stretch": {}, "contacts": {},
     }
     pairs = [
         ("input", "tpose", p["tpose"]), ("input", "fps", p["fps"]),
@@ -154,6 +173,8 @@ def _overrides(p: dict[str, Any]) -> dict[str, Any]:
         ("springs", "blend", p["blend"]),
         ("output", "skeleton", p["skeleton_mode"]),
         ("auto_stretch", "enabled", p["auto_stretch_on"]),
+        ("contacts", "enabled", None if p["contacts_mode"] is None else p["contacts_mode"] == "auto"),
+        ("contacts", "anchor", p["anchor"]), ("contacts", "floor", p["floor_on"]),
     ]
     for block, key, value in pairs:
         if value is not None:
@@ -179,6 +200,8 @@ def _config_from_options(p: dict[str, Any]):
     config = resolve_config(preset, text, _overrides(p), config_source=str(p["config_file"] or "options"))
     if p["stretches"]:
         config = dataclasses.replace(config, stretch=config.stretch + p["stretches"])
+    if p["targets"]:
+        config = dataclasses.replace(config, target=config.target + p["targets"])
     return preset, config
 
 
@@ -327,21 +350,22 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
 @click.argument("input_path", metavar="IN.bvh", type=click.Path(path_type=Path, allow_dash=True))
 @click.option("--limbs", is_flag=True, help="Also list the limbs found (base to end effector).")
 @click.option("--groups", is_flag=True, help="Also list the rubber-joint groups and the joints that ride rigidly.")
+@click.option("--contacts", is_flag=True, help="Also list where the end effectors touch the ground (frames).")
 @click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
 @verbosity_options
 @_fail_cleanly
-def info(input_path: Path, limbs: bool, groups: bool, fps: float | None, as_json: bool) -> None:
+def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float | None, as_json: bool) -> None:
     """Describe a clip: joints, channels, rotation orders, frames, fps, duration, height.
 
     \b
     Example:
-      mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs --groups
+      mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs --groups --contacts
     """
     from mocap_exaggerate.job import describe
 
     label = "<stdin>" if str(input_path) == "-" else str(input_path)
-    data = describe(input_path, fps=fps, limbs=limbs, groups=groups, label=label)
+    data = describe(input_path, fps=fps, limbs=limbs, groups=groups, contacts=contacts, label=label)
     orders = data["rotation_orders"]
     if as_json:
         click.echo(json.dumps(data, indent=2))
@@ -359,6 +383,12 @@ def info(input_path: Path, limbs: bool, groups: bool, fps: float | None, as_json
     if limbs:
         for name, chain in data["limbs"].items():
             click.echo(f"  {name:<11} {' > '.join(chain)}")
+    if contacts:
+        floor = data["contacts"]["floor"]
+        click.echo(f"  floor       {floor['height']:g} along {floor['up']}{floor['axis']} (the lowest any joint goes)")
+        for joint, runs in data["contacts"]["contacts"].items():
+            spans = ", ".join(f"{a}-{b}" for a, b in runs) or "none"
+            click.echo(f"  contact     {joint}: {spans}")
     if groups:
         click.echo(f"  sub-joints  {data['subjoints']} with the default 4 sub-links per link")
         for chain in data["groups"]:

@@ -320,7 +320,7 @@ def _timed(func, *args):
 
 
 def describe(source: Source, *, fps: float | None = None, limbs: bool = False, groups: bool = False,
-             label: str | None = None) -> dict[str, Any]:
+             contacts: bool = False, label: str | None = None) -> dict[str, Any]:
     """What ``info`` shows about a clip, as plain data (JSON-ready)."""
     motion, report = read_bvh(source, name=label, fps=fps)
     skeleton = motion.skeleton
@@ -347,6 +347,8 @@ def describe(source: Source, *, fps: float | None = None, limbs: bool = False, g
     }
     if limbs:
         data["limbs"] = {name: [skeleton.names[j] for j in limb.joints] for name, limb in find_limbs(skeleton).items()}
+    if contacts:
+        data["contacts"] = clip_contacts(motion)
     if groups:
         from .stages.subjoints import build_hierarchy
 
@@ -355,3 +357,27 @@ def describe(source: Source, *, fps: float | None = None, limbs: bool = False, g
         data["rigid"] = [skeleton.names[j] for j in np.flatnonzero(hierarchy.rigid)]
         data["subjoints"] = hierarchy.skeleton.num_joints
     return data
+
+
+def clip_contacts(motion, config=None) -> dict[str, Any]:
+    """Where a captured clip touches the ground, as the constraints stage finds it (JSON-ready).
+
+    ``{"floor": {...}, "contacts": {joint: [[start, end], ...]}}`` with frames counted
+    in the file (leading rest-pose frames are not searched).
+    """
+    from .stages.contacts import ContactConfig, find_contacts, find_effectors
+    from .stages.subjoints import minor_branches, rubber_groups
+
+    config = config or ContactConfig()
+    skeleton = motion.skeleton
+    world = motion.world_positions()
+    first = detect_rest_frames(motion, world)
+    found = find_limbs(skeleton)
+    rigid = minor_branches(skeleton)
+    effectors = find_effectors(skeleton, found, rigid, rubber_groups(skeleton, rigid))
+    ground, runs = find_contacts(skeleton, world[first:], motion.frame_time, found, effectors, config)
+    return {
+        "floor": {"axis": "XYZ"[ground.axis], "up": "+" if ground.sign > 0 else "-",
+                  "height": round(ground.sign * ground.floor, 6)},
+        "contacts": {skeleton.names[j]: (r + first).tolist() for j, r in runs.items()},
+    }

@@ -74,6 +74,8 @@ def manifest(
         info["result"]["spring_substeps"] = result.substeps
     if result.stretch is not None:
         info["result"]["stretch"] = result.stretch.events
+    if result.constraints is not None:
+        info["result"]["constraints"] = result.constraints
     if result.correct_report is not None:
         info["result"]["correct"] = {
             k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(result.correct_report).items()

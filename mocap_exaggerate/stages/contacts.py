@@ -54,6 +54,8 @@ __all__ = [
     "Effector",
     "find_effectors",
     "detect_contacts",
+    "find_contacts",
+    "constrain",
     "contact_weights",
     "laplacian_deform",
     "two_bone_ik",
@@ -381,6 +383,19 @@ def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground
     return runs[(runs[:, 1] - runs[:, 0] + 1 >= np.where(cut, min(shortest, 2), shortest))]
 
 
+def find_contacts(skeleton: Skeleton, captured_pos: np.ndarray, frame_time: float, limbs: dict[str, Limb],
+                  effectors: dict[int, Effector], config: ContactConfig) -> tuple[Ground, dict[int, np.ndarray]]:
+    """The ground, and the contact ranges ``(R, 2)`` of every end effector ``config.joints`` names."""
+    ground = find_ground(skeleton, captured_pos, limbs)
+    watched: list[int] = []
+    for name in config.joints:
+        for joint in resolve_effector(name, skeleton, limbs, effectors, "contacts.joints"):
+            if joint not in watched:
+                watched.append(joint)
+    return ground, {joint: detect_contacts(captured_pos, effectors[joint], ground, frame_time, config)
+                    for joint in watched}
+
+
 def smootherstep(x: np.ndarray) -> np.ndarray:
     """``6x^5 - 15x^4 + 10x^3`` on [0, 1]: zero first and second derivatives at both ends."""
     x = np.clip(x, 0.0, 1.0)
@@ -612,14 +627,8 @@ def constrain(
     found: dict[str, list[list[int]]] = {}
     ground = None
     if config.enabled:
-        ground = find_ground(skeleton, captured_pos, limbs)
-        watched: list[int] = []
-        for name in config.joints:
-            for joint in resolve_effector(name, skeleton, limbs, effectors, "contacts.joints"):
-                if joint not in watched:
-                    watched.append(joint)
-        for joint in watched:
-            runs = detect_contacts(captured_pos, effectors[joint], ground, frame_time, config)
+        ground, touching = find_contacts(skeleton, captured_pos, frame_time, limbs, effectors, config)
+        for joint, runs in touching.items():
             found[skeleton.names[joint]] = runs.tolist()
             if not len(runs):
                 continue
