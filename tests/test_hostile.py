@@ -189,7 +189,25 @@ CASES = {
     "unknown joint weight": lambda t, c, o: (["exaggerate", c, "-o", o, "--weight", "Tail=2"], 2, "Tail"),
     "stretch outside the clip": lambda t, c, o: (["exaggerate", c, "-o", o, "--stretch", "left_arm:100-900:2"],
                                                  2, "frames"),
+    # targets and contacts (issue 10)
+    "target on an unknown joint": lambda t, c, o: (["exaggerate", c, "-o", o, "--target", "Tail@50"], 2, "Tail"),
+    "target outside the clip": lambda t, c, o: (["exaggerate", c, "-o", o, "--target", "rFoot@9999"], 2, "outside"),
+    "target in the rest pose": lambda t, c, o: (["exaggerate", c, "-o", o, "--target", "rFoot@1"], 2, "rest-pose"),
+    "target on a knee": lambda t, c, o: (["exaggerate", c, "-o", o, "--target", "rShin@50"], 2, "not an end effector"),
+    "target with two numbers": lambda t, c, o: (["exaggerate", c, "-o", o, "--target", "rFoot@50=1,2"], 2, "x,y,z"),
+    "target at infinity": lambda t, c, o: (["exaggerate", c, "-o", o, "--target", "rFoot@50=1e999,0,0"], 2, "finite"),
+    "target without a frame": lambda t, c, o: (["exaggerate", c, "-o", o, "--target", "rFoot"], 2, "JOINT@FRAME"),
+    "contacts on a knee": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
+                                            _text(t / "c.toml", '[contacts]\njoints = ["lShin"]\n')], 2, "lShin"),
+    "contact speed negative": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
+                                                _text(t / "c.toml", "[contacts]\nspeed = -1\n")], 2, "speed"),
+    "unknown anchor": lambda t, c, o: (["exaggerate", c, "-o", o, "--anchor", "moon"], 2, "--anchor"),
 }
+
+
+def _text(path, text):
+    path.write_text(text)
+    return path
 
 
 def _preview_onto(clip):

@@ -222,21 +222,17 @@ def find_ground(skeleton: Skeleton, captured_pos: np.ndarray, limbs: dict[str, L
     """The up axis of the rest pose, its sign from the captured body, and the captured floor.
 
     captured_pos : (F, J, 3) float64 captured world positions (motion frames only)
-    limbs : found limbs; up is from the feet toward the head (without them: from the
-        lowest joints toward the root, which sits low in a body)
+    limbs : found limbs; up is from the feet toward the head (or the root); without
+        legs, toward positive coordinates
     """
     axis = skeleton.up_axis()
     heights = captured_pos[..., axis]
     limbs = limbs or {}
     feet = [limbs[name].end for name in ("left_leg", "right_leg") if name in limbs]
-    top = [limbs[name].end for name in ("neck", "spine") if name in limbs][:1]
-    if feet and top:
+    top = [limbs[name].end for name in ("neck", "spine") if name in limbs][:1] or [0]
+    sign = 1.0
+    if feet and heights.size:
         sign = 1.0 if np.mean(heights[:, top]) >= np.mean(heights[:, feet]) else -1.0
-    else:
-        root = float(np.mean(heights[:, 0]))
-        lowest = float(np.mean(heights.min(axis=1)))
-        highest = float(np.mean(heights.max(axis=1)))
-        sign = 1.0 if root - lowest <= highest - root else -1.0
     floor = float((sign * heights).min()) if heights.size else 0.0
     return Ground(axis, sign, floor, skeleton.height())
 

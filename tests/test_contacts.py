@@ -1,0 +1,303 @@
+"""Constraint post-processing: contacts, pinning by chain deformation, the floor, targets, stretch keys."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mocap_exaggerate import load_preset
+from mocap_exaggerate.config import PipelineConfig
+from mocap_exaggerate.io.bvh import read_bvh
+from mocap_exaggerate.limbs import find_limbs
+from mocap_exaggerate.pipeline import run
+from mocap_exaggerate.stages.contacts import (
+    ContactConfig,
+    TargetSpec,
+    contact_weights,
+    find_ground,
+    laplacian_deform,
+    parse_target,
+    soft_floor,
+    two_bone_ik,
+)
+from mocap_exaggerate.stages.stretch import StretchSpec
+
+from .helpers import SHARED_BVH, shared
+
+# A hand-made leg: hips, thigh, knee, ankle; the foot stands still on the floor for the first
+# 40 frames while the hips bob, then lifts.
+LEG = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 8 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT LeftUpLeg
+  {
+    OFFSET 1 0 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT LeftLeg
+    {
+      OFFSET 0 -4 0
+      CHANNELS 3 Zrotation Xrotation Yrotation
+      JOINT LeftFoot
+      {
+        OFFSET 0 -4 0
+        CHANNELS 3 Zrotation Xrotation Yrotation
+        End Site
+        {
+          OFFSET 0 0 1
+        }
+      }
+    }
+  }
+}
+"""
+
+
+def leg_clip(frames: int = 80) -> bytes:
+    """Hips bob 0.5 up and down with knee and hip bending to keep the ankle still, then the foot lifts."""
+    t = np.arange(frames) / 30.0
+    rows = []
+    for k, time in enumerate(t):
+        drop = 0.5 * (1 - np.cos(2 * np.pi * 1.5 * time)) / 2 if k < 40 else 0.0
+        # Thigh and shin of length 4: hips at 8 - drop, ankle on the floor at 0 under the hip.
+        half = (8.0 - drop) / 2.0
+        bend = np.degrees(np.arccos(np.clip(half / 4.0, -1, 1)))
+        lift = 0.0 if k < 40 else 30.0 * min(1.0, (k - 40) / 10)
+        rows.append(f"0 {8 - drop:.6f} 0 0 0 0 0 {-bend - lift:.6f} 0 0 {2 * bend:.6f} 0 0 {-bend + lift:.6f} 0")
+    return (LEG + f"MOTION\nFrames: {frames}\nFrame Time: {1 / 30:.8f}\n" + "\n".join(rows) + "\n").encode()
+
+
+def bare(config: PipelineConfig) -> PipelineConfig:
+    """Only extrapolation and the constraints: nothing else moves the joints."""
+    return replace(config, correct=replace(config.correct, enabled=False),
+                   springs=replace(config.springs, enabled=False), input=replace(config.input, tpose="keep"),
+                   limbs=(("left_leg", ("LeftUpLeg", "LeftLeg", "LeftFoot")),))
+
+
+# ---------------------------------------------------------------------------- the solvers
+
+
+def test_laplacian_solve_matches_a_dense_least_squares_solve():
+    rng = np.random.default_rng(7)
+    frames, n = 5, 9
+    points = np.cumsum(rng.normal(size=(frames, n, 3)), axis=1)
+    rest = np.concatenate([[0.0], rng.uniform(0.5, 2.0, n - 1)])
+    end = points[:, -1] + rng.normal(size=(frames, 3))
+    ours = laplacian_deform(points, end, rest)
+    # The same problem as least squares: every interior Laplacian kept, both ends held (heavily weighted).
+    a = rest[2:] / (rest[1:-1] + rest[2:])
+    rows = np.zeros((n - 2 + 2, n))
+    for i in range(1, n - 1):
+        rows[i - 1, [i - 1, i, i + 1]] = [-a[i - 1], 1.0, -(1 - a[i - 1])]
+    weight = 1e6
+    rows[n - 2, 0] = weight
+    rows[n - 1, n - 1] = weight
+    for f in range(frames):
+        delta = rows[: n - 2] @ points[f]
+        rhs = np.vstack([delta, weight * points[f, :1], weight * end[f : f + 1]])
+        dense, *_ = np.linalg.lstsq(rows, rhs, rcond=None)
+        np.testing.assert_allclose(ours[f], dense, atol=1e-6)
+
+
+def test_laplacian_deform_leaves_a_chain_whose_end_stays_put_and_spreads_a_move_by_length():
+    rng = np.random.default_rng(3)
+    points = np.cumsum(rng.normal(size=(4, 6, 3)), axis=1)
+    rest = np.array([0.0, 1.0, 1.0, 2.0, 1.0, 1.0])
+    np.testing.assert_allclose(laplacian_deform(points, points[:, -1], rest), points, atol=1e-12)
+    move = np.array([0.0, 0.0, 3.0])
+    moved = laplacian_deform(points, points[:, -1] + move, rest)
+    share = np.cumsum(rest) / rest.sum()
+    np.testing.assert_allclose(moved - points, np.broadcast_to(share[None, :, None] * move, points.shape), atol=1e-12)
+
+
+def test_two_bone_ik_known_answer():
+    base = np.array([[0.0, 0.0, 0.0]])
+    middle = np.array([[0.0, -1.0, 0.2]])  # bends toward +z now
+    end = np.array([[0.0, -2.0, 0.0]])
+    target = np.array([[0.0, -np.sqrt(2.0), 0.0]])
+    knee = two_bone_ik(base, middle * [1, 1, 0] + [0, 0, 0.2], end, target)
+    # Lengths stay 1.0198 and 1.0198 (the current bones); at reach sqrt(2) the knee sits off the line by
+    # sqrt(l^2 - (sqrt2/2)^2), on the +z side.
+    length = np.linalg.norm(middle[0] - base[0])
+    np.testing.assert_allclose(knee[0], [0.0, -np.sqrt(2) / 2, np.sqrt(length**2 - 0.5)], atol=1e-12)
+    # Out of reach: both bones stretch together, straight at the target.
+    far = two_bone_ik(base, middle, end, np.array([[0.0, -3.0, 0.0]]))
+    np.testing.assert_allclose(far[0], [0.0, -1.5, 0.0], atol=1e-12)
+
+
+def test_soft_floor_is_identity_above_smooth_at_the_floor_and_bounded_below():
+    heights = np.linspace(-5.0, 2.0, 7001)
+    pressed = soft_floor(heights, 0.0, 0.1)
+    np.testing.assert_array_equal(pressed[heights >= 0], heights[heights >= 0])
+    assert pressed.min() >= -0.1
+    slope = np.diff(pressed) / np.diff(heights)
+    assert np.all(np.diff(slope) >= -1e-9)  # no kink: the slope only grows, up to 1 at the floor
+    assert abs(slope[np.searchsorted(heights, 0.0) - 1] - 1.0) < 1e-2
+
+
+def test_contact_weights_ease_in_and_out_outside_the_contact():
+    weights = contact_weights(np.array([[10, 20]]), 40, ramp=5)
+    assert np.all(weights[10:21] == 1.0)
+    assert weights[4] == 0.0 and weights[26] == 0.0
+    assert np.all(np.diff(weights[4:11]) > 0) and np.all(np.diff(weights[20:27]) < 0)
+
+
+def test_parse_target():
+    assert parse_target("RightHand@1251") == TargetSpec(joint="RightHand", frame="1251")
+    assert parse_target("right_arm@1.5s=1,2,3").position == (1.0, 2.0, 3.0)
+    config = PipelineConfig(target=(parse_target("lHand@20=1,2,3"),), contacts=ContactConfig(anchor="exaggerated"))
+    assert PipelineConfig.from_toml(config.to_toml()) == config
+
+
+# ---------------------------------------------------------------------------- a leg with a known answer
+
+
+def test_a_planted_foot_stays_where_it_was_captured_and_the_leg_keeps_its_bones():
+    motion, _ = read_bvh(leg_clip())
+    config = bare(load_preset("looney"))
+    config = replace(config, subjoints=replace(config.subjoints, enabled=False), output=replace(config.output, skeleton="original"))
+    captured = motion.world_positions()
+    free = run(motion, replace(config, contacts=replace(config.contacts, enabled=False)))
+    pinned = run(motion, config)
+    ankle = motion.skeleton.index("LeftFoot")
+    knee = motion.skeleton.index("LeftLeg")
+    thigh = motion.skeleton.index("LeftUpLeg")
+    runs = pinned.constraints["contacts"]["LeftFoot"]
+    assert runs and runs[0][0] == 0 and 33 <= runs[0][1] <= 45
+    inside = slice(0, runs[0][1] + 1)
+    # The exaggeration moved the ankle; the contact puts it back exactly where it was captured.
+    assert np.abs(free.world_positions[inside, ankle] - captured[inside, ankle]).max() > 0.05
+    np.testing.assert_allclose(pinned.world_positions[inside, ankle], captured[inside, ankle], atol=1e-9)
+    # Two-bone IK keeps the (exaggerated) bone lengths.
+    for upper, lower in ((thigh, knee), (knee, ankle)):
+        np.testing.assert_allclose(
+            np.linalg.norm(pinned.world_positions[inside, lower] - pinned.world_positions[inside, upper], axis=-1),
+            np.linalg.norm(free.world_positions[inside, lower] - free.world_positions[inside, upper], axis=-1),
+            rtol=1e-9)
+    # Far from the contact, nothing changed.
+    late = slice(runs[0][1] + 20, None)
+    np.testing.assert_allclose(pinned.world_positions[late], free.world_positions[late], atol=1e-12)
+
+
+def test_the_rubber_leg_is_pinned_too_and_anchor_exaggerated_keeps_the_landing_offset():
+    motion, _ = read_bvh(leg_clip())
+    config = bare(load_preset("looney"))
+    captured = motion.world_positions()
+    ankle = motion.skeleton.index("LeftFoot")
+    pinned = run(motion, config)
+    out = pinned.world_positions[:, pinned.original_index]
+    runs = pinned.constraints["contacts"]["LeftFoot"]
+    inside = slice(runs[0][0], runs[0][1] + 1)
+    np.testing.assert_allclose(out[inside, ankle], captured[inside, ankle], atol=1e-9)
+    landed = run(motion, replace(config, contacts=replace(config.contacts, anchor="exaggerated")))
+    out = landed.world_positions[inside, landed.original_index[ankle]]
+    shift = out - captured[inside, ankle]
+    np.testing.assert_allclose(shift[:, 1], 0.0, atol=1e-9)  # on the captured ground
+    np.testing.assert_allclose(shift, shift[:1].repeat(len(shift), 0), atol=1e-9)  # one offset all along
+
+
+def test_omega_one_with_contacts_on_is_the_identity():
+    motion, _ = read_bvh(leg_clip())
+    config = bare(load_preset("cartoon"))
+    config = replace(config, extrapolate=replace(config.extrapolate, omega=1.0),
+                     subjoints=replace(config.subjoints, enabled=False), output=replace(config.output, skeleton="original"))
+    result = run(motion, config)
+    assert "constraints" in result.stages
+    np.testing.assert_allclose(result.world_positions, motion.world_positions(), atol=1e-9)
+
+
+# ---------------------------------------------------------------------------- real clips
+
+LOCOMOTION = ["cmu_12_01_walk.bvh", "cmu_131_01_walk_start_stop_max.bvh", "cmu_09_01_run_daz.bvh",
+              "cmu_01_01_forward_jumps.bvh", "cmu_16_01_jump_amc2bvh.bvh", "cmu_10_01_soccer_kick_daz.bvh",
+              "makehuman_zombie_walk_keyframed.bvh"]
+
+
+def _figures(motion, config):
+    """Skating (h/s) on the planted frames, deepest point below the floor (h), largest acceleration (h/s^2)."""
+    result = run(motion, config)
+    first = result.rest_frames
+    captured = motion.world_positions()[first:]
+    out = result.world_positions[first:]
+    skeleton = motion.skeleton
+    limbs = find_limbs(skeleton)
+    ground = find_ground(skeleton, captured, limbs)
+    h, dt = ground.height, motion.frame_time
+    feet = [limbs[name].end for name in ("left_leg", "right_leg")]
+    flat = [k for k in range(3) if k != ground.axis]
+
+    def speed(points):
+        return np.linalg.norm(np.gradient(points[..., flat], dt, axis=0), axis=-1) / h
+
+    height = ground.heights(captured[:, feet]) - ground.floor
+    planted = (speed(captured[:, feet]) < 0.25) & (height - np.percentile(height, 2, axis=0) < 0.04 * h)
+    skating = speed(out[:, result.original_index[feet]])[planted].mean()
+    captured_skating = speed(captured[:, feet])[planted].mean()
+    deepest = max(0.0, float((ground.floor - ground.heights(out)).max()) / h)
+    accel = float(np.linalg.norm(out[2:] - 2 * out[1:-1] + out[:-2], axis=-1).max()) / dt**2 / h
+    return skating, captured_skating, deepest, accel
+
+
+@pytest.mark.parametrize("preset", ["cartoon", "looney"])
+@pytest.mark.parametrize("name", LOCOMOTION)
+def test_feet_stay_planted_above_the_floor_without_pops(name, preset):
+    motion, _ = read_bvh(shared(name), fps=120.0 if "amc2bvh" in name else None)
+    config = load_preset(preset)
+    skating, captured, deepest, accel = _figures(motion, config)
+    free_skating, _, free_deepest, free_accel = _figures(motion, replace(config, contacts=replace(config.contacts, enabled=False)))
+    assert skating <= 1.5 * captured + 0.01, (skating, captured, free_skating)
+    assert deepest <= 0.01, (deepest, free_deepest)
+    assert accel <= 2.0 * free_accel, (accel, free_accel)
+
+
+def test_a_stretch_keeps_its_length_with_the_springs_on():
+    motion, _ = read_bvh(shared("assimp_boxing_toes.bvh"))
+    limbs = find_limbs(motion.skeleton)
+    base, end = limbs["right_arm"].base, limbs["right_arm"].end
+    config = load_preset("cartoon")
+    plain = replace(config, springs=replace(config.springs, enabled=False), contacts=replace(config.contacts, enabled=False),
+                    subjoints=replace(config.subjoints, enabled=False), output=replace(config.output, skeleton="original"))
+    before = run(motion, plain).world_positions[1251]
+    length = np.linalg.norm(before[end] - before[base])
+    for scale in (1.5, 2.0, 2.5):
+        stretched = replace(config, stretch=(StretchSpec(limb="right_arm", start=1230, end=1251, scale=scale),))
+        result = run(motion, stretched)
+        after = result.world_positions[1251, result.original_index]
+        assert np.linalg.norm(after[end] - after[base]) == pytest.approx(scale * length, rel=0.01)
+        assert result.constraints["stretch_keys"][0]["ratio"] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_a_target_puts_the_hand_there_at_its_frame():
+    motion, _ = read_bvh(shared("assimp_boxing_toes.bvh"))
+    hand = find_limbs(motion.skeleton)["right_arm"].end
+    captured = motion.world_positions()
+    config = replace(load_preset("looney"), target=(TargetSpec(joint="right_arm", frame=1251),
+                                                    TargetSpec(joint="RightWrist", frame=600, position=(10.0, 120.0, 5.0))))
+    result = run(motion, config)
+    out = result.world_positions[:, result.original_index[hand]]
+    np.testing.assert_allclose(out[1251], captured[1251, hand], atol=1e-9)
+    np.testing.assert_allclose(out[600], [10.0, 120.0, 5.0], atol=1e-9)
+
+
+# ---------------------------------------------------------------------------- as users run it
+
+
+def test_info_lists_contacts_and_the_manifest_records_them(tmp_path, sample_clip):
+    done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "info", str(sample_clip), "--contacts",
+                           "--json"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    listed = json.loads(done.stdout)["contacts"]
+    assert listed["floor"]["axis"] in "XYZ" and listed["contacts"]
+    done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "exaggerate", str(sample_clip), "-o",
+                           str(tmp_path), "--no-glb", "--anchor", "exaggerated"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    manifest = json.loads(next(tmp_path.glob("*.json")).read_text())
+    assert "constraints" in manifest["stages"]
+    assert manifest["result"]["constraints"]["contacts"] == listed["contacts"]
+    assert manifest["config"]["contacts"]["anchor"] == "exaggerated"
