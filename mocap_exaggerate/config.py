@@ -120,13 +120,13 @@ class PipelineConfig:
                 blocks["description"] = value
                 continue
             if key == "stretch":
-                blocks["stretch"] = _stretch_from_list(value, source)
+                blocks["stretch"] = _tables_from_list(value, source, "stretch", StretchSpec, {"limb", "start", "end", "scale"})
                 continue
             if key == "limbs":
                 blocks["limbs"] = _limbs_from_table(value, source)
                 continue
             if key == "target":
-                blocks["target"] = _targets_from_list(value, source)
+                blocks["target"] = _tables_from_list(value, source, "target", TargetSpec, {"joint", "frame"})
                 continue
             if key not in _BLOCKS:
                 known = ", ".join(list(_BLOCKS) + ["limbs", "[stretch]", "[target]"])
@@ -218,52 +218,26 @@ def read_config_text(path: str | os.PathLike) -> str:
         raise ConfigError(f"{path}: not UTF-8 text (byte {error.start} is 0x{data[error.start]:02x})") from None
 
 
-def _stretch_from_list(items: Any, source: str) -> tuple[StretchSpec, ...]:
+def _tables_from_list(items: Any, source: str, key: str, spec: type, required: set[str]) -> tuple:
+    """``[[key]]`` tables as ``spec`` instances; TOML arrays become tuples."""
     if not isinstance(items, (list, tuple)):
-        raise ConfigError(f"{source}: stretch must be a list of tables ([[stretch]])")
+        raise ConfigError(f"{source}: {key} must be a list of tables ([[{key}]])")
     specs = []
-    known = {f.name for f in fields(StretchSpec)}
+    known = {f.name for f in fields(spec)}
     for number, item in enumerate(items, start=1):
         if not isinstance(item, dict):
-            raise ConfigError(f"{source}: stretch #{number} must be a table")
+            raise ConfigError(f"{source}: {key} #{number} must be a table")
         unknown = set(item) - known
         if unknown:
-            raise ConfigError(f"{source}: stretch #{number}: unknown key {sorted(unknown)[0]} (known: {', '.join(sorted(known))})")
-        missing = {"limb", "start", "end", "scale"} - set(item)
+            raise ConfigError(f"{source}: {key} #{number}: unknown key {sorted(unknown)[0]} (known: {', '.join(sorted(known))})")
+        missing = required - set(item)
         if missing:
-            raise ConfigError(f"{source}: stretch #{number}: missing {', '.join(sorted(missing))}")
-        values = dict(item)
-        for ease in ("ease_in", "ease_out"):
-            if isinstance(values.get(ease), list):
-                values[ease] = tuple(values[ease])
+            raise ConfigError(f"{source}: {key} #{number}: missing {', '.join(sorted(missing))}")
+        values = {name: tuple(value) if isinstance(value, list) else value for name, value in item.items()}
         try:
-            specs.append(StretchSpec(**values))
+            specs.append(spec(**values))
         except ConfigError as error:
-            raise ConfigError(f"{source}: stretch #{number}: {error}") from None
-    return tuple(specs)
-
-
-def _targets_from_list(items: Any, source: str) -> tuple[TargetSpec, ...]:
-    if not isinstance(items, (list, tuple)):
-        raise ConfigError(f"{source}: target must be a list of tables ([[target]])")
-    specs = []
-    known = {f.name for f in fields(TargetSpec)}
-    for number, item in enumerate(items, start=1):
-        if not isinstance(item, dict):
-            raise ConfigError(f"{source}: target #{number} must be a table")
-        unknown = set(item) - known
-        if unknown:
-            raise ConfigError(f"{source}: target #{number}: unknown key {sorted(unknown)[0]} (known: {', '.join(sorted(known))})")
-        missing = {"joint", "frame"} - set(item)
-        if missing:
-            raise ConfigError(f"{source}: target #{number}: missing {', '.join(sorted(missing))}")
-        values = dict(item)
-        if isinstance(values.get("position"), list):
-            values["position"] = tuple(values["position"])
-        try:
-            specs.append(TargetSpec(**values))
-        except ConfigError as error:
-            raise ConfigError(f"{source}: target #{number}: {error}") from None
+            raise ConfigError(f"{source}: {key} #{number}: {error}") from None
     return tuple(specs)
 
 

@@ -43,7 +43,7 @@ from ..errors import ConfigError, check_flag, check_number
 from ..limbs import Limb
 from ..rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
 from ..skeleton import Skeleton
-from .extrapolate import parse_duration
+from .extrapolate import parse_duration, parse_frame
 
 __all__ = [
     "ContactConfig",
@@ -138,10 +138,10 @@ class TargetSpec:
             object.__setattr__(self, "position", tuple(float(v) for v in self.position))
         if parse_duration(self.window, 1.0, what=f"target {self.joint}: window") > 10 * 1000:
             raise ConfigError(f"target {self.joint}: window must be at most 10 s")
-        _frame_number(self.frame, 1.0, self.joint)
+        parse_frame(self.frame, 1.0, what=f"target {self.joint}: frame")
 
     def frame_index(self, frame_time: float, num_frames: int) -> int:
-        frame = _frame_number(self.frame, frame_time, self.joint)
+        frame = parse_frame(self.frame, frame_time, what=f"target {self.joint}: frame")
         if not 0 <= frame < num_frames:
             raise ConfigError(f"target {self.joint}@{self.frame}: frame {frame} is outside the clip (0-{num_frames - 1})")
         return frame
@@ -151,21 +151,6 @@ class TargetSpec:
         if self.position is not None:
             out["position"] = list(self.position)
         return out
-
-
-def _frame_number(value: int | str, frame_time: float, joint: str) -> int:
-    if isinstance(value, bool):
-        raise ConfigError(f"target {joint}: frame must be a frame number or a time, got {value!r}")
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, float) and value.is_integer():
-        return int(value)
-    text = str(value).strip()
-    if re.fullmatch(r"\d+", text):
-        return int(text)
-    if not re.search(r"(s|ms|f|frames?)$", text):
-        raise ConfigError(f"target {joint}: frame must be a frame number or a time such as 1.2s, got {value!r}")
-    return int(round(parse_duration(text, frame_time, what=f"target {joint}: frame")))
 
 
 _TARGET = re.compile(r"^\s*([^@=\s]+)\s*@\s*([^=]+?)\s*(?:=\s*(.*))?$")

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import ConfigError, check_flag, check_number
 
-__all__ = ["ExtrapolateConfig", "extrapolate", "parse_duration", "gaussian_average"]
+__all__ = ["ExtrapolateConfig", "extrapolate", "parse_duration", "parse_frame", "gaussian_average"]
 
 _DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(s|ms|f|frames?)?\s*$")
 
@@ -36,6 +36,26 @@ def parse_duration(value: str | float | int, frame_time: float, *, what: str = "
     if unit == "ms":
         return number / 1000.0 / frame_time
     return number
+
+
+def parse_frame(value: str | float | int, frame_time: float, *, what: str) -> int:
+    """A frame index from a frame number (``120``, ``"120"``) or a time (``"1.2s"``, ``"800ms"``, ``"96f"``).
+
+    >>> parse_frame("1.5s", 1 / 30, what="start"), parse_frame(12, 1 / 30, what="start")
+    (45, 12)
+    """
+    if isinstance(value, bool):
+        raise ConfigError(f"{what} must be a frame number or a time, got {value!r}")
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    text = str(value).strip()
+    if re.fullmatch(r"\d+", text):
+        return int(text)
+    if not re.search(r"(s|ms|f|frames?)$", text):
+        raise ConfigError(f"{what} must be a frame number or a time such as 1.2s, got {value!r}")
+    return int(round(parse_duration(text, frame_time, what=what)))
 
 
 #: Widest Gaussian accepted, whatever the clip (a minute; 100,000 frames).

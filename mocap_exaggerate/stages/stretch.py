@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import ConfigError, check_number
 from ..rotations import quat_between, quat_rotate
-from .extrapolate import parse_duration
+from .extrapolate import parse_duration, parse_frame
 
 __all__ = [
     "StretchSpec",
@@ -105,8 +105,8 @@ class StretchSpec:
 
     def frames(self, frame_time: float, num_frames: int) -> tuple[int, int]:
         """The inclusive frame range, validated against the clip."""
-        first = _frame(self.start, frame_time, f"stretch {self.limb}: start")
-        last = _frame(self.end, frame_time, f"stretch {self.limb}: end")
+        first = parse_frame(self.start, frame_time, what=f"stretch {self.limb}: start")
+        last = parse_frame(self.end, frame_time, what=f"stretch {self.limb}: end")
         if not 0 <= first < last < num_frames:
             raise ConfigError(
                 f"stretch {self.limb}: frames {first}-{last} must lie within 0-{num_frames - 1} with start < end"
@@ -139,17 +139,6 @@ def overlapping(span: tuple[int, int], others) -> bool:
     """Whether the inclusive frame range ``span`` shares a frame with any ``(first, last)`` in ``others``."""
     first, last = span
     return any(first <= b and a <= last for a, b in others)
-
-
-def _frame(value: int | str, frame_time: float, what: str) -> int:
-    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
-        return int(value)
-    if isinstance(value, float) and value.is_integer():
-        return int(value)
-    text = str(value).strip()
-    if re.fullmatch(r"\d+", text):
-        return int(text)
-    return int(round(parse_duration(text, frame_time, what=what)))
 
 
 _SPEC = re.compile(r"^\s*([A-Za-z_][\w.-]*)\s*:\s*([^:]+?)\s*-\s*([^:]+?)\s*:\s*([0-9.]+)\s*((?::[^:]+)*)$")
