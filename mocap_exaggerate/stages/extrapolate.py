@@ -1,7 +1,32 @@
-"""Trajectory extrapolation (Kwon & Lee 2008, section 4.1, eq. 1-3).
+"""Trajectory extrapolation (Kwon & Lee 2008, section 4.1, eq. 1-3), band-limited.
 
 Each joint's world trajectory ``j_k(t)`` is pushed away from its Gaussian
-average ``a_k = j_k * g_sigma``: ``e_k = omega * j_k + (1 - omega) * a_k``.
+average ``a_k = j_k * g_sigma``. The paper's eq. (1),
+``e_k = omega * j_k + (1 - omega) * a_k = j_k + (omega - 1)(j_k - a_k)``,
+multiplies every deviation faster than sigma by omega, capture noise and
+marker kinks included: at omega 5 a small step in the capture becomes a
+one-frame jump a fifth of the body tall. So the deviation that is amplified
+is taken after a short smoothing, a difference of Gaussians:
+
+    e_k = j_k + (omega - 1) * ramp(t) * (j_k * g_smooth - j_k * g_sigma)
+
+The band between ``smooth`` and ``sigma`` (swings, reaches, weight shifts)
+is exaggerated; what is faster than ``smooth`` (jitter) passes through as
+captured, neither amplified nor removed. ``smooth = 0`` is the paper's
+formula. ``ramp`` fades the exaggeration in over one sigma after the first
+motion frame (a T-pose or settling frames before it are kept as captured,
+and would otherwise end in a jump) and out over one sigma before the last,
+where the reflected padding has least to go on. omega = 1 is the identity.
+
+Speed limit: exaggerating a deviation also multiplies its speed, so the
+fastest moment of a move (a take-off, a punch) becomes a whip four or five
+times faster than anything in the capture, which reads as a pop. With
+``max_speed`` = m the added motion ``d = e - j`` of a joint may move at most
+``(m - 1)`` times that joint's top captured speed, so the joint never moves
+more than m times as fast as it ever did: where ``|d'|`` is over budget
+``d`` is scaled down by a gain that is smooth in time (its running minimum
+over sigma / 3 either side, spread like the correction's), a few passes. Extremes of a pose, where the
+motion is slow, keep their full exaggeration; only the whip is calmed.
 """
 
 from __future__ import annotations
@@ -13,7 +38,8 @@ import numpy as np
 
 from ..errors import ConfigError, check_flag, check_number
 
-__all__ = ["ExtrapolateConfig", "extrapolate", "parse_duration", "parse_frame", "gaussian_average"]
+__all__ = ["ExtrapolateConfig", "extrapolate", "parse_duration", "parse_frame", "gaussian_average", "smootherstep",
+           "end_ramp", "spread_max"]
 
 _DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(s|ms|f|frames?)?\s*$")
 
@@ -72,6 +98,13 @@ class ExtrapolateConfig:
         "deviation" and get exaggerated.
     omega : how far past the captured motion to go; 1 is the identity, 5 the
         paper's usual value, values below 1 calm the motion down.
+    smooth : the short time scale (same units as sigma) below which motion is
+        passed through unamplified: capture jitter and one-frame kinks. 0 is
+        the paper's formula, which amplifies them too. At most half of sigma
+        is used.
+    max_speed : no joint moves faster than this many times its own top
+        captured speed (the exaggeration is calmed where it would); 0 for
+        no limit.
     weights : ``(pattern, weight)`` pairs; a pattern is a joint name, a shell
         pattern (``Left*``) or a limb name (``left_arm``). A joint's effective
         omega is ``1 + weight * (omega - 1)``; weight 0 keeps it as captured.
@@ -81,6 +114,8 @@ class ExtrapolateConfig:
     enabled: bool = True
     sigma: str | float = "0.2s"
     omega: float = 5.0
+    smooth: str | float = "0.04s"
+    max_speed: float = 2.0
     weights: tuple[tuple[str, float], ...] = field(default=())
 
     def __post_init__(self) -> None:
@@ -91,6 +126,10 @@ class ExtrapolateConfig:
             raise ConfigError(f"extrapolate.sigma must be at most {MAX_SIGMA_SECONDS:g} s or {MAX_SIGMA_FRAMES} "
                               f"frames, got {self.sigma!r}")
         check_number("extrapolate.omega", self.omega, 0, 50)
+        if self.max_speed != 0:
+            check_number("extrapolate.max_speed", self.max_speed, 1, 100)
+        if parse_duration(self.smooth, 1.0, what="extrapolate.smooth") > MAX_SIGMA_SECONDS:
+            raise ConfigError(f"extrapolate.smooth must be at most {MAX_SIGMA_SECONDS:g} s, got {self.smooth!r}")
         for pattern, weight in self.weights:
             check_number(f"extrapolate.weights[{pattern!r}]", weight, 0, 10)
 
@@ -107,6 +146,11 @@ class ExtrapolateConfig:
                 f"({frames} frames) or 1000 frames"
             )
         return sigma
+
+    def smooth_frames(self, frame_time: float) -> float:
+        """The smoothing scale in frames: at most half of sigma (a band needs room between the two)."""
+        smooth = parse_duration(self.smooth, frame_time, what="extrapolate.smooth")
+        return min(smooth, 0.5 * parse_duration(self.sigma, frame_time, what="extrapolate.sigma"))
 
 
 def gaussian_average(world_pos: np.ndarray, sigma: float, *, axis: int = 0) -> np.ndarray:
@@ -155,6 +199,9 @@ def extrapolate(
     sigma: float,
     omega: float,
     weights: np.ndarray | None = None,
+    smooth: float = 0.0,
+    ramp: float = 0.0,
+    max_speed: float = 0.0,
     axis: int = 0,
 ) -> np.ndarray:
     """Exaggerate trajectories away from their Gaussian average.
@@ -165,16 +212,21 @@ def extrapolate(
     sigma : Gaussian standard deviation in frames
     omega : extrapolation factor; 1 returns the input unchanged
     weights : (J,) float64 or None; per-joint scale of ``omega - 1``
+    smooth : standard deviation in frames of the short smoothing; 0 amplifies every deviation
+    ramp : frames over which the exaggeration fades in at the first frame and out at the last
+        (a C2 smootherstep); 0 for none
+    max_speed : the most a joint may move per frame, as a multiple of its own largest captured
+        move; 0 for no limit
 
     Returns
     -------
-    (F, J, 3) float64 ``j + w (omega - 1) (j - a)``, i.e. eq. (1) with a
-    per-joint omega.
+    (F, J, 3) float64 ``j + w (omega - 1) r(t) (j * g_smooth - j * g_sigma)``: eq. (1) with a
+    per-joint omega when ``smooth`` and ``ramp`` are 0.
 
     Examples
     --------
     >>> t = np.linspace(0, 2 * np.pi, 101)[:, None, None]
-    >>> out = extrapolate(np.sin(t) * np.ones((1, 1, 3)), sigma=3.0, omega=1.0)
+    >>> out = extrapolate(np.sin(t) * np.ones((1, 1, 3)), sigma=3.0, omega=1.0, smooth=1.0)
     >>> bool(np.allclose(out, np.sin(t)))
     True
     """
@@ -189,5 +241,81 @@ def extrapolate(
         gain = gain * weights
     if not np.any(gain):
         return world_pos.copy()
-    average = gaussian_average(world_pos, sigma, axis=axis)
-    return world_pos + gain[:, None] * (world_pos - average)
+    moved = np.moveaxis(world_pos, axis, 0)
+    deviation = gaussian_average(moved, smooth) - gaussian_average(moved, sigma)
+    deviation *= gain[:, None]
+    if ramp > 0:
+        deviation *= end_ramp(len(moved), ramp)[:, None, None]
+    if max_speed > 0 and len(moved) > 2:
+        budget = (max_speed - 1.0) * np.linalg.norm(np.diff(moved, axis=0), axis=-1).max(axis=0)
+        deviation = _limit_speed(deviation, budget, max(int(round(sigma / 3.0)), 2))
+    return np.moveaxis(moved + deviation, 0, axis)
+
+
+#: Passes of the speed limit; each leaves less over budget (the gain's own change adds a little speed).
+_SPEED_PASSES = 4
+
+
+def _limit_speed(deviation: np.ndarray, budget: np.ndarray, radius: int) -> np.ndarray:
+    """``deviation`` (F, J, 3) scaled by per-joint gains smooth in time so its one-frame moves stay within ``budget`` (J,).
+
+    The gain a frame needs, ``budget / |step|`` where a step is over it,
+    is spread over ``radius`` frames either side (a running minimum, then a
+    Gaussian truncated there, so never above what any frame needs) and the
+    deviation scaled by it; repeated, since scaling by a changing gain adds
+    a step of its own.
+    """
+    out = deviation
+    for _ in range(_SPEED_PASSES):
+        step = np.linalg.norm(np.diff(out, axis=0), axis=-1)  # (F-1, J)
+        over = step > budget * (1.0 - 1e-9)
+        if not over.any():
+            break
+        need = np.ones(step.shape[0] + 1, dtype=np.float64)[:, None].repeat(step.shape[1], axis=1)
+        share = np.where(over, budget / np.maximum(step, 1e-300), 1.0) * 0.98  # a step joins two frames: both
+        need[:-1] = np.minimum(need[:-1], share)
+        need[1:] = np.minimum(need[1:], share)
+        out = out * (1.0 - spread_max(1.0 - need, radius))[..., None]
+    return out
+
+
+def spread_max(values: np.ndarray, radius: int) -> np.ndarray:
+    """A running maximum over ``radius`` frames either side, then a Gaussian (sigma = radius / 3) truncated there.
+
+    Along axis 0. Never below ``values`` (every tap of the Gaussian sees a
+    maximum over a window that contains the frame), 0 more than ``2 radius``
+    frames from any nonzero value, and as smooth as the Gaussian.
+
+    >>> spread_max(np.array([0, 0, 0, 0, 1.0, 0, 0, 0, 0]), 1).round(3).tolist()
+    [0.0, 0.0, 0.011, 0.989, 1.0, 0.989, 0.011, 0.0, 0.0]
+    """
+    values = np.asarray(values, dtype=np.float64)
+    if radius < 1 or len(values) < 2:
+        return values.copy()
+    edges = [(radius, radius)] + [(0, 0)] * (values.ndim - 1)
+    padded = np.pad(values, edges, mode="edge")
+    peaks = np.lib.stride_tricks.sliding_window_view(padded, 2 * radius + 1, axis=0).max(axis=-1)
+    taps = np.arange(-radius, radius + 1, dtype=np.float64)
+    kernel = np.exp(-0.5 * (3.0 * taps / radius) ** 2)
+    kernel /= kernel.sum()
+    padded = np.pad(peaks, edges, mode="edge")
+    spread = sum(weight * padded[k : k + len(values)] for k, weight in enumerate(kernel))
+    return np.maximum(spread, values)  # guard the last bit of rounding
+
+
+def smootherstep(x: np.ndarray) -> np.ndarray:
+    """``6x^5 - 15x^4 + 10x^3`` on [0, 1], clamped: 0 to 1 with zero first and second derivatives at both ends."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * x * (x * (6.0 * x - 15.0) + 10.0)
+
+
+def end_ramp(frames: int, length: float) -> np.ndarray:
+    """(frames,) weights rising from 0 at the first frame to 1 over ``length`` frames and falling back at the end.
+
+    On a clip shorter than two ramps the two halves meet below 1.
+
+    >>> np.round(end_ramp(7, 3.0), 3).tolist()
+    [0.0, 0.21, 0.79, 1.0, 0.79, 0.21, 0.0]
+    """
+    t = np.arange(frames, dtype=np.float64)
+    return smootherstep(np.minimum(t, frames - 1 - t) / max(length, 1e-12))
