@@ -27,7 +27,7 @@ from .motion import Motion
 from .skeleton import Skeleton
 from .stages.contacts import ContactConfig, StretchKey, TargetSpec, constrain
 from .stages.correct import CorrectReport, correct
-from .stages.extrapolate import extrapolate
+from .stages.extrapolate import extrapolate, parse_duration
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping
@@ -139,10 +139,11 @@ def _extrapolate(state: State, config) -> State:
     skeleton = state.motion.skeleton
     weights = resolve_weights(skeleton, config.weights, state.limbs)
     positions = state.positions.copy()
+    frame_time = state.motion.frame_time
+    sigma = config.sigma_frames(frame_time, len(state.positions) - first)
     positions[first:] = extrapolate(
-        state.positions[first:], sigma=config.sigma_frames(state.motion.frame_time, len(state.positions) - first),
-        omega=config.omega,
-        weights=weights,
+        state.positions[first:], sigma=sigma, omega=config.omega, weights=weights,
+        smooth=config.smooth_frames(frame_time), ramp=sigma, max_speed=config.max_speed,
     )
     return replace(state, positions=positions)
 
@@ -153,6 +154,7 @@ def _correct(state: State, config) -> State:
     body, report = correct(
         state.positions[first:], skeleton.parents, skeleton.link_lengths(), threshold=config.threshold,
         delta=config.delta, max_stretch=config.max_stretch, max_iter=config.max_iter,
+        smooth=parse_duration(config.smooth, state.motion.frame_time, what="correct.smooth"),
     )
     positions = state.positions.copy()
     positions[first:] = body

@@ -16,6 +16,22 @@ Because of that, the iteration count each frame needs is known from its
 starting error, and `correct` applies those iterations in one step: the
 same result as iterating (a frame-by-frame loop oracle in the tests checks
 it), at the cost of a single pass over the joints.
+
+Done frame by frame, that reads as jitter once the motion is exaggerated: a
+frame just over the threshold is pulled back while its neighbour is not,
+and neighbours needing 3 or 4 iterations keep 1/8 or 1/16 of their excess.
+So with ``smooth`` > 0 (the default) the share of excess removed is made
+smooth in time, keeping the guarantees:
+
+1. per frame, the share of excess the iteration removes, ``c = 1 - (1 - delta)^k``
+   (0 under threshold);
+2. spread over time by a running maximum over ``smooth`` either side, then
+   a Gaussian truncated at that radius: never less than (1), so every frame
+   still ends at or under the threshold, and exactly 0 more than two radii
+   from any frame over it (those frames are untouched);
+3. applied to a soft excess: ``max(0, d - m l)`` with its corner rounded
+   over 5 % of the link's length (never less than the hard excess), so a
+   link reaching its free stretch slows down instead of stopping dead.
 """
 
 from __future__ import annotations
@@ -25,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ConfigError, check_flag, check_number
+from .extrapolate import parse_duration, spread_max
 
 __all__ = ["CorrectConfig", "CorrectReport", "correct", "stretch_error"]
 
@@ -42,6 +59,9 @@ class CorrectConfig:
     max_stretch : stretch up to this factor of a link's rest length is not
         counted as excess (1 counts every stretch).
     max_iter : safety bound on iterations.
+    smooth : how far (a duration, ``"0.1s"``, ``"12f"``) the correction is
+        spread in time on each side of a frame that needs it; 0 corrects
+        frame by frame exactly as the paper's iteration.
     """
 
     enabled: bool = True
@@ -49,9 +69,12 @@ class CorrectConfig:
     delta: float = 0.5
     max_stretch: float = 1.0
     max_iter: int = 500
+    smooth: str | float = "0.1s"
 
     def __post_init__(self) -> None:
         check_flag("correct.enabled", self.enabled)
+        if parse_duration(self.smooth, 1.0, what="correct.smooth") > 10 * 1000:
+            raise ConfigError(f"correct.smooth must be at most 10 s, got {self.smooth!r}")
         check_number("correct.threshold", self.threshold, 0, 10)
         check_number("correct.delta", self.delta, 0, 1, low_open=True)
         check_number("correct.max_stretch", self.max_stretch, 1, 10)
@@ -101,6 +124,7 @@ def correct(
     delta: float = 0.5,
     max_stretch: float = 1.0,
     max_iter: int = 500,
+    smooth: float = 0.0,
 ) -> tuple[np.ndarray, CorrectReport]:
     """Pull over-stretched links back until each frame's error is at most ``threshold``.
 
@@ -110,10 +134,13 @@ def correct(
     parents : (J,) int, -1 for the root, parents before children
     rest_lengths : (J,) float64 rest length of the link ending at each joint
     threshold, delta, max_stretch, max_iter : see `CorrectConfig`
+    smooth : radius in frames over which the correction is spread in time; 0 is
+        the paper's frame-by-frame iteration
 
     Returns
     -------
     positions : (F, J, 3) float64, a new array; frames at or under threshold
+        (and, with ``smooth``, more than ``2 smooth`` frames from one over it)
         are copied unchanged, and the root never moves
     report : CorrectReport
     """
@@ -135,32 +162,61 @@ def correct(
     if not len(active):
         return out, CorrectReport(0, 0, float(errors.max(initial=0.0)), float(errors.max(initial=0.0)), 0)
 
+    target = max(threshold, _TOLERANCE) * (1.0 - 1e-6)  # land clearly under, not on it to the last bit
+
     # Iteration k leaves (1 - delta)^k of every excess, so the number of
     # iterations a frame needs is known in advance: apply them at once.
     start = errors[active]
-    target = max(threshold, _TOLERANCE)
     if delta >= 1.0:
         needed = np.ones(len(active), dtype=np.int64)
     else:
         ratio = np.log(target / start) / np.log1p(-delta)
         # A tiny delta needs more iterations than max_iter (or int64) can count: cap before converting.
         needed = np.clip(np.ceil(ratio - 1e-9), 1, max_iter + 1).astype(np.int64)
-        # Guard the rounding of the logs, and land clearly under the target, not on it to the last bit.
-        needed += (1.0 - delta) ** needed * start > target * (1.0 - 1e-6)
+        # Guard the rounding of the logs.
+        needed += (1.0 - delta) ** needed * start > target
     steps = np.minimum(needed, max_iter)
-    keep = (1.0 - delta) ** steps  # share of each excess left
-    xa, vec_a, len_a = x[active], vec[active], length[active]
-    new_len = len_a - (1.0 - keep)[:, None] * xa
-    scale = np.divide(new_len, len_a, out=np.ones_like(len_a), where=len_a > 0)
-    links = vec_a * scale[..., None]
-    pos = out[active]
-    for j in range(1, num_joints):
-        pos[:, j] = pos[:, parents[j]] + links[:, j - 1]
-    out[active] = pos
-
     iterations = int(steps.max())
     unconverged = int(np.sum(needed > max_iter))
-    max_before = float(errors.max())
-    max_after = float(np.max(np.where(np.isin(np.arange(len(errors)), active), 0.0, errors), initial=0.0))
-    max_after = max(max_after, float((keep * start).max()))
-    return out, CorrectReport(len(active), iterations, max_before, max_after, unconverged)
+    share = np.zeros(len(errors))
+    share[active] = 1.0 - (1.0 - delta) ** steps  # share of each excess removed
+    if smooth > 0:
+        share = np.clip(spread_max(share, int(round(smooth))), 0.0, 1.0)
+        touched = np.flatnonzero(share > 0)
+        excess = soft_excess(length[touched], max_stretch * rest_lengths[1:], _SOFT * rest_lengths[1:])
+    else:
+        touched = active
+        excess = x[active]
+    new_len = length[touched] - share[touched, None] * excess
+    out[touched] = _rebuild(out[touched], parents, vec[touched], length[touched], new_len)
+    after = stretch_error(out[touched], parents, rest_lengths, max_stretch=max_stretch)
+    max_after = max(float(after.max(initial=0.0)), float(np.delete(errors, touched).max(initial=0.0)))
+    return out, CorrectReport(len(touched), iterations, float(errors.max()), max_after, unconverged)
+
+
+def _rebuild(pos: np.ndarray, parents: np.ndarray, vec: np.ndarray, length: np.ndarray,
+             new_length: np.ndarray) -> np.ndarray:
+    """Positions with every link ``vec`` (F, J-1, 3) scaled to ``new_length``, children carrying their subtree."""
+    scale = np.divide(new_length, length, out=np.ones_like(length), where=length > 0)
+    links = vec * scale[..., None]
+    for j in range(1, len(parents)):
+        pos[:, j] = pos[:, parents[j]] + links[:, j - 1]
+    return pos
+
+
+#: Width of the rounded corner of the soft excess, as a share of the link's rest length.
+_SOFT = 0.05
+
+
+def soft_excess(length: np.ndarray, limit: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """``max(0, length - limit)`` with its corner rounded (C1) over ``length - limit`` in [-width, width].
+
+    Never less than the hard excess, equal to it outside the corner.
+
+    >>> soft_excess(np.array([0.0, 1.0, 2.0, 3.0]), 2.0, 1.0).tolist()
+    [0.0, 0.0, 0.25, 1.0]
+    """
+    u = length - limit
+    width = np.maximum(width, 1e-300)
+    inside = np.clip(u, -width, width) + width
+    return np.where(u >= width, u, inside * inside / (4.0 * width))
