@@ -24,6 +24,7 @@ __all__ = [
     "quat_inv",
     "quat_rotate",
     "quat_slerp",
+    "quat_pow",
     "quat_between",
     "quat_normalize",
     "quat_angle",
@@ -112,6 +113,26 @@ def quat_slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarra
     out = wa * a + wb * b
     norm = np.linalg.norm(out, axis=-1, keepdims=True)
     return out / np.where(norm > 0.0, norm, 1.0)
+
+
+def quat_pow(q: np.ndarray, t: np.ndarray | float) -> np.ndarray:
+    """``q`` raised to ``t``: the same axis, ``t`` times the angle, for either sign of ``q``.
+
+    Unlike `quat_slerp` from the identity, a quaternion with ``w < 0`` (a turn of
+    more than half a revolution) is not replaced by the shorter turn the other
+    way: interpolation stays continuous when a chain of rotations made
+    hemisphere-continuous in time passes half a turn.
+
+    >>> bool(np.allclose(quat_pow(np.array([0.0, 0.0, -1.0, 0.0]), 0.5), [0, 0, -np.sqrt(0.5), np.sqrt(0.5)]))
+    True
+    """
+    q = np.asarray(q, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)[..., None]
+    vector = q[..., :3]
+    size = np.linalg.norm(vector, axis=-1, keepdims=True)
+    half = np.arctan2(size, q[..., 3:])  # in [0, pi]: more than a half turn when w < 0
+    axis = vector / np.where(size > 1e-12, size, 1.0)
+    return np.concatenate([axis * np.sin(t * half), np.cos(t * half)], axis=-1)
 
 
 def quat_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -22,7 +22,8 @@ import numpy as np
 
 from ..kinematics import frame_blocks, local_from_world
 from ..motion import Motion
-from ..rotations import cross, quat_between, quat_from_matrix, quat_mul, quat_normalize, quat_rotate, quat_slerp
+from ..rotations import (cross, quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow,
+                         quat_rotate, quat_slerp, quat_unroll)
 from .subjoints import SubjointHierarchy
 
 __all__ = ["recover_orientations", "motion_from_world", "incoming_joint"]
@@ -170,7 +171,25 @@ def recover_orientations(
     out[:, original] = world
     between = np.flatnonzero(~hierarchy.is_original)
     if len(between):
-        first, second, fraction = hierarchy.link_parent[between], hierarchy.link_child[between], hierarchy.fraction[between]
-        for part in frame_blocks(frames):
-            out[part, between] = quat_slerp(world[part, first], world[part, second], fraction)
+        out[:, between] = _between(world, hierarchy.link_parent[between], hierarchy.link_child[between],
+                                   hierarchy.fraction[between])
     return out, sub_pos
+
+
+def _between(world: np.ndarray, first: np.ndarray, second: np.ndarray, fraction: np.ndarray) -> np.ndarray:
+    """Orientations ``(F, n, 4)`` of sub-joints a ``fraction`` of the way from joint ``first`` to ``second``.
+
+    The turn from one end to the other, ``r = q_first^-1 q_second``, is made
+    hemisphere-continuous in time and, per link, taken the way most frames
+    take it (``w >= 0`` on average); the sub-joint is ``q_first r^fraction``.
+    A plain slerp takes the shorter way frame by frame, so when a forearm's
+    twist and its bend add up past half a turn every sub-joint on the link
+    spins round in one frame.
+    """
+    links, which = np.unique(np.stack([first, second], axis=1), axis=0, return_inverse=True)
+    turn = quat_unroll(quat_mul(quat_inv(world[:, links[:, 0]]), world[:, links[:, 1]]), axis=0)
+    turn *= np.where(turn[..., 3].mean(axis=0) < 0.0, -1.0, 1.0)[:, None]
+    out = np.empty(world.shape[:1] + (len(first), 4))
+    for part in frame_blocks(len(world)):
+        out[part] = quat_mul(world[part][:, first], quat_pow(turn[part][:, which.ravel()], fraction))
+    return out
