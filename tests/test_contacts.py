@@ -26,6 +26,7 @@ from mocap_exaggerate.stages.contacts import (
     two_bone_ik,
 )
 from mocap_exaggerate.stages.stretch import StretchSpec
+from mocap_exaggerate.tpose import detect_rest_frames
 
 from .helpers import SHARED_BVH, shared
 
@@ -253,7 +254,12 @@ def test_feet_stay_planted_above_the_floor_without_pops(name, preset):
     free_skating, _, free_deepest, free_accel = _figures(motion, replace(config, contacts=replace(config.contacts, enabled=False)))
     assert skating <= 1.5 * captured + 0.01, (skating, captured, free_skating)
     assert deepest <= 0.01, (deepest, free_deepest)
-    assert accel <= 2.0 * free_accel, (accel, free_accel)
+    # A planted foot is the captured foot, glitches and all (the kick's plant foot slips 4 h/s for
+    # three frames): no pop beyond twice the free run's or the capture's own largest acceleration.
+    first = detect_rest_frames(motion, motion.world_positions())
+    cap = motion.world_positions()[first:]
+    captured_accel = float(np.linalg.norm(np.diff(cap, 2, axis=0), axis=-1).max()) / motion.frame_time**2 / motion.skeleton.height()
+    assert accel <= 2.0 * max(free_accel, captured_accel), (accel, free_accel, captured_accel)
 
 
 def test_a_stretch_keeps_its_length_with_the_springs_on():

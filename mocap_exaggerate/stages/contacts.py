@@ -43,7 +43,7 @@ from ..errors import ConfigError, check_flag, check_number
 from ..limbs import Limb
 from ..rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
 from ..skeleton import Skeleton
-from .extrapolate import parse_duration, parse_frame
+from .extrapolate import parse_duration, parse_frame, smootherstep, spread_max
 
 __all__ = [
     "ContactConfig",
@@ -57,6 +57,7 @@ __all__ = [
     "find_contacts",
     "constrain",
     "contact_weights",
+    "run_ramps",
     "laplacian_deform",
     "two_bone_ik",
     "soft_floor",
@@ -377,25 +378,51 @@ def find_contacts(skeleton: Skeleton, captured_pos: np.ndarray, frame_time: floa
                     for joint in watched}
 
 
-def smootherstep(x: np.ndarray) -> np.ndarray:
-    """``6x^5 - 15x^4 + 10x^3`` on [0, 1]: zero first and second derivatives at both ends."""
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * x * (x * (6.0 * x - 15.0) + 10.0)
+def contact_weights(runs: np.ndarray, frames: int, ramp) -> np.ndarray:
+    """Weight ``(F,)``: 1 inside the runs, easing to 0 over ``ramp`` frames outside them.
 
-
-def contact_weights(runs: np.ndarray, frames: int, ramp: float) -> np.ndarray:
-    """Weight ``(F,)``: 1 inside the runs, easing to 0 over ``ramp`` frames outside them."""
+    ``ramp`` is one number for every run, or ``(n, 2)`` frames before and after each run.
+    """
     weight = np.zeros(frames)
     if not len(runs):
         return weight
-    mask = _mask_from_runs(runs, frames)
+    if np.ndim(ramp) == 0:
+        mask = _mask_from_runs(runs, frames)
+        index = np.arange(frames, dtype=np.float64)
+        last = np.maximum.accumulate(np.where(mask, index, -np.inf))
+        following = np.minimum.accumulate(np.where(mask, index, np.inf)[::-1])[::-1]
+        distance = np.minimum(index - last, following - index)
+        if ramp <= 0:
+            return (distance == 0).astype(np.float64)
+        return smootherstep(1.0 - distance / (ramp + 1.0))
     index = np.arange(frames, dtype=np.float64)
-    last = np.maximum.accumulate(np.where(mask, index, -np.inf))
-    following = np.minimum.accumulate(np.where(mask, index, np.inf)[::-1])[::-1]
-    distance = np.minimum(index - last, following - index)
-    if ramp <= 0:
-        return (distance == 0).astype(np.float64)
-    return smootherstep(1.0 - distance / (ramp + 1.0))
+    for (first, last), (before, after) in zip(runs, np.asarray(ramp, dtype=np.float64)):
+        early = smootherstep(1.0 - (first - index) / (before + 1.0))
+        late = smootherstep(1.0 - (index - last) / (after + 1.0))
+        weight = np.maximum(weight, np.where(index < first, early, np.where(index > last, late, 1.0)))
+    return weight
+
+
+def run_ramps(runs: np.ndarray, gap: np.ndarray, speed: float, ramp: float, longest: float) -> np.ndarray:
+    """Frames ``(n, 2)`` to ease into and out of each run.
+
+    At least ``ramp``, and long enough that closing the ``gap`` (F,) between
+    where the point is and where it must be adds at most ``speed`` per frame
+    over the whole ease (a smootherstep's steepest slope is 15/8 of its
+    average), but never more than ``longest``: the shortest ``R`` with
+    ``15/8 max(gap over the R frames) / R <= speed``.
+    """
+    frames = len(gap)
+    longest = max(int(np.ceil(longest)), int(np.ceil(ramp)))
+    steps = np.arange(longest + 1)
+    out = np.empty((len(runs), 2))
+    for row, (first, last) in enumerate(runs):
+        for side, (start, direction) in enumerate(((first, -1), (last, 1))):
+            reach = np.clip(start + direction * steps, 0, frames - 1)
+            needed = 1.875 * np.maximum.accumulate(gap[reach]) / max(speed, 1e-300)
+            fits = np.flatnonzero((steps >= ramp) & (steps >= needed))
+            out[row, side] = steps[fits[0]] if len(fits) else longest
+    return out
 
 
 def anchored_targets(captured: np.ndarray, current: np.ndarray, runs: np.ndarray, ground: Ground) -> np.ndarray:
@@ -613,11 +640,14 @@ def constrain(
             found[skeleton.names[joint]] = runs.tolist()
             if not len(runs):
                 continue
-            weight = contact_weights(runs, frames, ramp)
             if config.anchor == "captured":
                 target = captured_pos[:, joint]
             else:
                 target = anchored_targets(captured_pos[:, joint], out[:, original[joint]], runs, ground)
+            # A foot landing far from where the exaggeration put it eases in longer, not faster.
+            gap = np.linalg.norm(target - out[:, original[joint]], axis=-1)
+            speed = float(np.linalg.norm(np.diff(captured_pos[:, joint], axis=0), axis=-1).max(initial=0.0))
+            weight = contact_weights(runs, frames, run_ramps(runs, gap, speed, ramp, 0.5 / frame_time))
             g = goal(joint)
             g += weight[:, None] * (target - g)
             pins[joint] = weight
@@ -649,10 +679,15 @@ def constrain(
                 lift = soft_floor(lowest, ground.floor, margin) - lowest
                 if not np.any(lift > 1e-6 * ground.height):
                     break
+                lift = _spread_lift(lift, ramp, pins.get(joint))
                 _move_end(out, hierarchy, effector, out[:, original[joint]] + lift[:, None] * up, rest)
-        moving = ~hierarchy.rigid[hierarchy.link_child]
+        moving = np.flatnonzero(~hierarchy.rigid[hierarchy.link_child])
         heights = ground.heights(out[:, moving])
-        out[:, moving, ground.axis] = ground.sign * soft_floor(heights, ground.floor, margin)
+        held = np.zeros(heights.shape)
+        for joint, weight in pins.items():
+            held[:, np.isin(hierarchy.link_child[moving], effectors[joint].chain[-1:])] = weight[:, None]
+        lift = _spread_lift(soft_floor(heights, ground.floor, margin) - heights, ramp, held)
+        out[:, moving, ground.axis] = ground.sign * (heights + lift)
 
     held = []
     for key in keys:
@@ -663,6 +698,19 @@ def constrain(
     pin_joints = np.array(sorted(pins), dtype=np.int64)
     pin_weights = np.stack([pins[j] for j in pin_joints], axis=1) if len(pin_joints) else np.zeros((frames, 0))
     return ConstraintResult(out, pin_joints, pin_weights, found, ground, held)
+
+
+def _spread_lift(lift: np.ndarray, ramp: float, pinned: np.ndarray | None) -> np.ndarray:
+    """A lift off the floor (F,) or (F, K), spread in time so a point coming down fast slows before it.
+
+    Never less than ``lift`` (the spread's running maximum sees every frame), and
+    on planted frames (``pinned`` weight 1) exactly ``lift``, so a pinned foot stays put.
+    """
+    spread = spread_max(lift, int(round(ramp)))
+    if pinned is None:
+        return spread
+    pinned = pinned if pinned.shape == lift.shape else pinned.reshape(lift.shape)
+    return lift + (spread - lift) * (1.0 - pinned)
 
 
 def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, rest: np.ndarray) -> None:
