@@ -131,6 +131,7 @@ def quat_pow(q: np.ndarray, t: np.ndarray | float) -> np.ndarray:
     vector = q[..., :3]
     size = np.linalg.norm(vector, axis=-1, keepdims=True)
     half = np.arctan2(size, q[..., 3:])  # in [0, pi]: more than a half turn when w < 0
+    half = np.where(size > 1e-12, half, 0.0)  # -1 is a whole turn about no axis in particular: none
     axis = vector / np.where(size > 1e-12, size, 1.0)
     return np.concatenate([axis * np.sin(t * half), np.cos(t * half)], axis=-1)
 

@@ -9,7 +9,7 @@ from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.config import load_preset, resolve_config
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.rotations import quat_angle, quat_between, quat_rotate, quat_slerp
-from mocap_exaggerate.stages.orient import _triad
+from mocap_exaggerate.stages.orient import _fit_turn
 
 
 
@@ -43,12 +43,19 @@ def test_slerp_endpoints_and_midpoint():
     assert np.allclose(quat_angle(a, mid), quat_angle(a, b) / 2, atol=1e-7)
 
 
-def test_triad_recovers_a_known_rotation():
+def test_the_fit_recovers_a_known_rotation_and_holds_a_thin_set_steady():
     rng = np.random.default_rng(1102)
     truth = Rotation.random(30, random_state=3)
     u = np.repeat(rng.normal(size=(1, 3, 3)), 30, axis=0)
     v = np.stack([truth[i].apply(u[i]) for i in range(30)])
-    assert np.max(quat_angle(_triad(u, v), truth.as_quat())) < 1e-9
+    # The pull toward "no turn" costs a fraction of a degree on a well spread set...
+    assert np.degrees(np.max(quat_angle(_fit_turn(u, v), truth.as_quat()))) < 1.0
+    assert np.max(quat_angle(_fit_turn(u, u), np.array([0.0, 0, 0, 1]))) < 1e-9
+    # ...and decides the turn about the line of two hips nearly opposite each other: none.
+    hips = np.array([[[1.0, -0.02, 0.0], [-1.0, -0.02, 0.0]]])
+    jiggled = hips + np.array([[[0.0, 0.0, 0.03], [0.0, 0.0, -0.03]]])  # turned 1.7 degrees about y
+    turn = _fit_turn(hips, jiggled)
+    assert np.degrees(quat_angle(turn, np.array([0.0, 0, 0, 1]))) < 3.0
 
 
 def test_written_subjoint_bvh_opens_in_bvhio_with_the_expected_joints(sample_clip, tmp_path):

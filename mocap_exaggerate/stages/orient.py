@@ -35,25 +35,34 @@ def motion_from_world(world_pos, world_rot, skeleton, frame_time, euler_hint=Non
     return Motion(skeleton, frame_time, local_rot, local_pos, euler_hint)
 
 
-def _triad(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotations ``(F, 4)`` carrying vector sets ``u (F, n, 3)`` onto ``v (F, n, 3)`` (TRIAD).
+#: Weight of the pull toward "no turn" in `_fit_turn`, relative to the vectors' summed squared length.
+_STEADY = 0.001
 
-    The first axis is the mean direction of the set, the second the member
-    farthest from it; exact when ``v`` is a rotated ``u``, and a few vector
-    operations instead of a per-frame SVD.
+
+def _fit_turn(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotations ``(F, 4)`` carrying vector sets ``u (F, n, 3)`` onto ``v (F, n, 3)``: Kabsch, held steady.
+
+    The least-squares rotation of the vectors about their centroid (an SVD of
+    ``sum v u^T`` per frame): the children moving together relative to the
+    joint is a shift, not a turn. (Children that all start at one point, a
+    chest whose neck and collars share an offset, are fitted as they are.) With a small pull toward the identity
+    (three extra pairs ``(s e_k, s e_k)``), a set the vectors barely span (a
+    pelvis seen from its two hips) leaves the turn about their common line to
+    that pull, the smallest turn, instead of to noise: a TRIAD spun an
+    exaggerated pelvis whose hips rose past it by 60 to 140 degrees in a frame.
     """
-    def frame(vectors: np.ndarray, pick: int) -> np.ndarray:
-        first = vectors.mean(axis=1)
-        first /= np.maximum(np.linalg.norm(first, axis=-1, keepdims=True), 1e-300)
-        second = cross(first, vectors[:, pick])
-        second /= np.maximum(np.linalg.norm(second, axis=-1, keepdims=True), 1e-300)
-        return np.stack([first, second, cross(first, second)], axis=-1)
-
-    middle = len(u) // 2
-    mean = u[middle].mean(axis=0)
-    pick = int(np.argmax(np.linalg.norm(np.cross(mean, u[middle]), axis=-1)))
-    matrix = np.einsum("fij,fkj->fik", frame(v, pick), frame(u, pick))
-    return quat_from_matrix(matrix)
+    middle = u[len(u) // 2]
+    centred = middle - middle.mean(axis=0)
+    if np.linalg.norm(centred, axis=-1).max() > 0.1 * np.linalg.norm(middle, axis=-1).max():
+        u = u - u.mean(axis=1, keepdims=True)  # a shift of all the children together is not a turn
+        v = v - v.mean(axis=1, keepdims=True)
+    cross_cov = np.einsum("fni,fnj->fij", v, u)
+    scale = _STEADY * np.einsum("fni,fni->f", u, u)
+    cross_cov += scale[:, None, None] * np.eye(3)
+    left, _, right = np.linalg.svd(cross_cov)
+    sign = np.sign(np.linalg.det(left @ right))
+    left[:, :, 2] *= np.where(sign == 0, 1.0, sign)[:, None]
+    return quat_from_matrix(left @ right)
 
 
 def _effective_lengths(skeleton) -> np.ndarray:
@@ -131,11 +140,8 @@ def recover_orientations(
         if len(targets) >= 2:
             u = source_pos[:, targets] - source_pos[:, j : j + 1]
             v = new_pos[:, targets] - new_pos[:, j : j + 1]
-            sizes = np.linalg.svd(u[len(u) // 2], compute_uv=False)
-            if sizes[1] > 1e-2 * sizes[0]:
-                world[:, j] = quat_mul(_triad(u, v), source_rot[:, j])
-                continue
-            targets = targets[:1]
+            world[:, j] = quat_mul(_fit_turn(u, v), source_rot[:, j])
+            continue
         if len(targets) == 1:
             single_joint.append(j)
             single_from.append(j)
@@ -188,7 +194,13 @@ def _between(world: np.ndarray, first: np.ndarray, second: np.ndarray, fraction:
     """
     links, which = np.unique(np.stack([first, second], axis=1), axis=0, return_inverse=True)
     turn = quat_unroll(quat_mul(quat_inv(world[:, links[:, 0]]), world[:, links[:, 1]]), axis=0)
-    turn *= np.where(turn[..., 3].mean(axis=0) < 0.0, -1.0, 1.0)[:, None]
+    # A jump of more than a quarter turn in one frame (a T-pose ending) has no continuity to keep:
+    # each stretch between such jumps takes the way most of its frames take.
+    dots = np.abs(np.sum(turn[1:] * turn[:-1], axis=-1))  # (F-1, L)
+    segment = np.concatenate([np.zeros((1, turn.shape[1]), np.int64), np.cumsum(dots < 0.7, axis=0)])
+    segment += np.arange(turn.shape[1]) * len(turn)  # unique per link
+    votes = np.bincount(segment.ravel(), turn[..., 3].ravel(), minlength=turn.shape[1] * len(turn))
+    turn *= np.where(votes[segment] < 0.0, -1.0, 1.0)[..., None]
     out = np.empty(world.shape[:1] + (len(first), 4))
     for part in frame_blocks(len(world)):
         out[part] = quat_mul(world[part][:, first], quat_pow(turn[part][:, which.ravel()], fraction))
