@@ -27,6 +27,13 @@ more than m times as fast as it ever did: where ``|d'|`` is over budget
 ``d`` is scaled down by a gain that is smooth in time (its running minimum
 over sigma / 3 either side, spread like the correction's), a few passes. Extremes of a pose, where the
 motion is slow, keep their full exaggeration; only the whip is calmed.
+
+Stillness: where a joint stands still in the capture its average still
+moves when a move comes near, and an exaggerated hip would float about
+while the actor waits. With ``still`` set, a joint's exaggeration is scaled
+by how much it moves: none below ``still`` speed (body heights per
+second), all from 3x that, spread over sigma / 3 either side so a move's
+anticipation and settle survive.
 """
 
 from __future__ import annotations
@@ -105,6 +112,11 @@ class ExtrapolateConfig:
     max_speed : no joint moves faster than this many times its own top
         captured speed (the exaggeration is calmed where it would); 0 for
         no limit.
+    still : a joint slower than this (body heights per second) is left as
+        captured, so a waiting body does not float; 0 exaggerates always.
+    torso : the spine, neck, head, collars and shoulders get this share of
+        their own exaggeration on top of the root's (the torso is the body's
+        mass and swings less than the limbs, but rides with the hips).
     weights : ``(pattern, weight)`` pairs; a pattern is a joint name, a shell
         pattern (``Left*``) or a limb name (``left_arm``). A joint's effective
         omega is ``1 + weight * (omega - 1)``; weight 0 keeps it as captured.
@@ -116,6 +128,8 @@ class ExtrapolateConfig:
     omega: float = 5.0
     smooth: str | float = "0.04s"
     max_speed: float = 2.0
+    still: float = 0.05
+    torso: float = 1.0
     weights: tuple[tuple[str, float], ...] = field(default=())
 
     def __post_init__(self) -> None:
@@ -126,6 +140,8 @@ class ExtrapolateConfig:
             raise ConfigError(f"extrapolate.sigma must be at most {MAX_SIGMA_SECONDS:g} s or {MAX_SIGMA_FRAMES} "
                               f"frames, got {self.sigma!r}")
         check_number("extrapolate.omega", self.omega, 0, 50)
+        check_number("extrapolate.still", self.still, 0, 10)
+        check_number("extrapolate.torso", self.torso, 0, 10)
         if self.max_speed != 0:
             check_number("extrapolate.max_speed", self.max_speed, 1, 100)
         if parse_duration(self.smooth, 1.0, what="extrapolate.smooth") > MAX_SIGMA_SECONDS:
@@ -202,6 +218,8 @@ def extrapolate(
     smooth: float = 0.0,
     ramp: float = 0.0,
     max_speed: float = 0.0,
+    still: float = 0.0,
+    torso: tuple[np.ndarray, float] | None = None,
     axis: int = 0,
 ) -> np.ndarray:
     """Exaggerate trajectories away from their Gaussian average.
@@ -217,6 +235,10 @@ def extrapolate(
         (a C2 smootherstep); 0 for none
     max_speed : the most a joint may move per frame, as a multiple of its own largest captured
         move; 0 for no limit
+    still : a joint moving less than this per frame (after the short smoothing) keeps its
+        captured position, fully exaggerated from 3x that; 0 for always
+    torso : ``(joints, share)``: these joints take the root's exaggeration and only ``share``
+        of their own on top of it (a torso that swings less but still rides with the hips)
 
     Returns
     -------
@@ -242,8 +264,16 @@ def extrapolate(
     if not np.any(gain):
         return world_pos.copy()
     moved = np.moveaxis(world_pos, axis, 0)
-    deviation = gaussian_average(moved, smooth) - gaussian_average(moved, sigma)
+    smoothed = gaussian_average(moved, smooth)
+    deviation = smoothed - gaussian_average(moved, sigma)
     deviation *= gain[:, None]
+    if still > 0 and len(moved) > 1:
+        speed = np.linalg.norm(np.gradient(smoothed, axis=0), axis=-1)  # (F, J) per frame
+        moving = smootherstep((speed - still) / (2.0 * still))
+        deviation *= spread_max(moving, max(int(round(sigma)), 1))[..., None]
+    if torso is not None and len(torso[0]):
+        joints, share = torso
+        deviation[:, joints] = deviation[:, :1] + share * (deviation[:, joints] - deviation[:, :1])
     if ramp > 0:
         deviation *= end_ramp(len(moved), ramp)[:, None, None]
     if max_speed > 0 and len(moved) > 2:
