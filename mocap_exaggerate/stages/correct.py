@@ -41,9 +41,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ConfigError, check_flag, check_number
-from .extrapolate import parse_duration, spread_max
+from .extrapolate import parse_duration, smootherstep, spread_max
 
-__all__ = ["CorrectConfig", "CorrectReport", "correct", "stretch_error"]
+__all__ = ["CorrectConfig", "CorrectReport", "accent_stretch", "correct", "stretch_error"]
 
 #: A threshold of 0 is reached only in the limit for delta < 1; stop this close to it.
 _TOLERANCE = 1e-9
@@ -62,6 +62,16 @@ class CorrectConfig:
     smooth : how far (a duration, ``"0.1s"``, ``"12f"``) the correction is
         spread in time on each side of a frame that needs it; 0 corrects
         frame by frame exactly as the paper's iteration.
+    accent_speed : stretch at accents. 0 (the paper): every link may stretch
+        to ``max_stretch`` at any time. Otherwise a link gets that much free
+        stretch only while its end moves (relative to the root, in the
+        capture) at this speed or more, in body heights per second, none
+        below a third of it: limbs stretch on the fast part of a move and
+        hold their length in a pose, as a drawn cartoon does.
+    torso : the share of ``max_stretch``'s free stretch the torso's links (the
+        spine and neck chains) get; below 1 they are also held to it in
+        every frame, so the torso never stretches more than that (cartoon
+        torsos stretch less than limbs). 1 treats them like any link.
     """
 
     enabled: bool = True
@@ -70,9 +80,13 @@ class CorrectConfig:
     max_stretch: float = 1.0
     max_iter: int = 500
     smooth: str | float = "0.1s"
+    accent_speed: float = 0.0
+    torso: float = 1.0
 
     def __post_init__(self) -> None:
         check_flag("correct.enabled", self.enabled)
+        check_number("correct.torso", self.torso, 0, 1)
+        check_number("correct.accent_speed", self.accent_speed, 0, 100)
         if parse_duration(self.smooth, 1.0, what="correct.smooth") > 10 * 1000:
             raise ConfigError(f"correct.smooth must be at most 10 s, got {self.smooth!r}")
         check_number("correct.threshold", self.threshold, 0, 10)
@@ -93,6 +107,25 @@ class CorrectReport:
     unconverged_frames: int
 
 
+def accent_stretch(captured: np.ndarray, frame_time: float, height: float, *, max_stretch: float,
+                   accent_speed: float, radius: int) -> np.ndarray:
+    """Per-frame, per-joint free stretch ``(F, J)`` for the link ending at each joint.
+
+    ``1 + (max_stretch - 1) a`` where the accent ``a`` rises (smootherstep)
+    from 0 at a third of ``accent_speed`` to 1 at it, for the joint's speed
+    relative to the root in ``captured`` (F, J, 3), in body heights per
+    second; spread over ``radius`` frames either side (never below the
+    frame's own) so a stretch builds before the fast part and lets go after.
+    """
+    if len(captured) < 2:
+        return np.full(captured.shape[:2], float(max_stretch))
+    relative = captured - captured[:, :1]
+    speed = np.linalg.norm(np.gradient(relative, axis=0), axis=-1) / (frame_time * height)
+    low = accent_speed / 3.0
+    accent = spread_max(smootherstep((speed - low) / (accent_speed - low)), radius)
+    return 1.0 + (max_stretch - 1.0) * np.clip(accent, 0.0, 1.0)
+
+
 def stretch_error(
     world_pos: np.ndarray, parents: np.ndarray, rest_lengths: np.ndarray, *, max_stretch: float = 1.0
 ) -> np.ndarray:
@@ -108,10 +141,18 @@ def _total_length(rest_lengths: np.ndarray) -> float:
     return total
 
 
+def _limits(max_stretch, rest_lengths: np.ndarray) -> np.ndarray:
+    """Free length of each link: ``max_stretch`` (a number, or (F, J) per frame and joint) times rest length."""
+    max_stretch = np.asarray(max_stretch, dtype=np.float64)
+    if max_stretch.ndim == 2:
+        max_stretch = max_stretch[:, 1:]
+    return max_stretch * rest_lengths[1:]
+
+
 def _excess(world_pos, parents, rest_lengths, max_stretch):
     vec = world_pos[:, 1:] - world_pos[:, parents[1:]]
     length = np.linalg.norm(vec, axis=-1)
-    x = np.maximum(0.0, length - max_stretch * rest_lengths[1:])
+    x = np.maximum(0.0, length - _limits(max_stretch, rest_lengths))
     return x, vec, length
 
 
@@ -125,6 +166,7 @@ def correct(
     max_stretch: float = 1.0,
     max_iter: int = 500,
     smooth: float = 0.0,
+    hard: np.ndarray | None = None,
 ) -> tuple[np.ndarray, CorrectReport]:
     """Pull over-stretched links back until each frame's error is at most ``threshold``.
 
@@ -133,9 +175,12 @@ def correct(
     world_pos : (F, J, 3) float64 world positions (e.g. after extrapolation)
     parents : (J,) int, -1 for the root, parents before children
     rest_lengths : (J,) float64 rest length of the link ending at each joint
-    threshold, delta, max_stretch, max_iter : see `CorrectConfig`
+    threshold, delta, max_stretch, max_iter : see `CorrectConfig`; ``max_stretch`` may also be
+        (F, J), per frame and per joint (the link ending at it)
     smooth : radius in frames over which the correction is spread in time; 0 is
         the paper's frame-by-frame iteration
+    hard : (J,) bool, links (by the joint they end at) held to their free length in
+        every frame, whatever the threshold (their whole excess removed)
 
     Returns
     -------
@@ -159,7 +204,17 @@ def correct(
     x, vec, length = _excess(world_pos, parents, rest_lengths, max_stretch)
     errors = x.sum(axis=1) / total
     active = np.flatnonzero(errors > threshold)
-    if not len(active):
+    hard = np.zeros(len(parents), bool) if hard is None else np.asarray(hard, bool)
+    hard_links = hard[1:]
+    limit = _limits(max_stretch, rest_lengths)
+    limit = np.broadcast_to(limit, length.shape)
+    width = _SOFT * rest_lengths[1:]
+    if smooth > 0:
+        excess = soft_excess(length, limit, width)
+    else:
+        excess = x
+    held = np.flatnonzero((excess[:, hard_links] > 0).any(axis=1)) if hard_links.any() else np.zeros(0, int)
+    if not len(active) and not len(held):
         return out, CorrectReport(0, 0, float(errors.max(initial=0.0)), float(errors.max(initial=0.0)), 0)
 
     target = max(threshold, _TOLERANCE) * (1.0 - 1e-6)  # land clearly under, not on it to the last bit
@@ -167,7 +222,9 @@ def correct(
     # Iteration k leaves (1 - delta)^k of every excess, so the number of
     # iterations a frame needs is known in advance: apply them at once.
     start = errors[active]
-    if delta >= 1.0:
+    if not len(active):
+        needed = np.zeros(0, dtype=np.int64)
+    elif delta >= 1.0:
         needed = np.ones(len(active), dtype=np.int64)
     else:
         ratio = np.log(target / start) / np.log1p(-delta)
@@ -176,20 +233,19 @@ def correct(
         # Guard the rounding of the logs.
         needed += (1.0 - delta) ** needed * start > target
     steps = np.minimum(needed, max_iter)
-    iterations = int(steps.max())
+    iterations = int(steps.max(initial=0))
     unconverged = int(np.sum(needed > max_iter))
     share = np.zeros(len(errors))
     share[active] = 1.0 - (1.0 - delta) ** steps  # share of each excess removed
     if smooth > 0:
         share = np.clip(spread_max(share, int(round(smooth))), 0.0, 1.0)
-        touched = np.flatnonzero(share > 0)
-        excess = soft_excess(length[touched], max_stretch * rest_lengths[1:], _SOFT * rest_lengths[1:])
-    else:
-        touched = active
-        excess = x[active]
-    new_len = length[touched] - share[touched, None] * excess
+    touched = np.union1d(np.flatnonzero(share > 0), held)
+    link_share = np.repeat(share[touched, None], len(parents) - 1, axis=1)
+    link_share[:, hard_links] = 1.0
+    new_len = length[touched] - link_share * excess[touched]
     out[touched] = _rebuild(out[touched], parents, vec[touched], length[touched], new_len)
-    after = stretch_error(out[touched], parents, rest_lengths, max_stretch=max_stretch)
+    ms = np.asarray(max_stretch)
+    after = stretch_error(out[touched], parents, rest_lengths, max_stretch=ms[touched] if ms.ndim == 2 else ms)
     max_after = max(float(after.max(initial=0.0)), float(np.delete(errors, touched).max(initial=0.0)))
     return out, CorrectReport(len(touched), iterations, float(errors.max()), max_after, unconverged)
 
