@@ -26,8 +26,8 @@ from .limbs import LIMB_NAMES, find_limbs, limb_joints
 from .motion import Motion
 from .skeleton import Skeleton
 from .stages.contacts import ContactConfig, StretchKey, TargetSpec, constrain
-from .stages.correct import CorrectReport, correct
-from .stages.extrapolate import extrapolate, parse_duration
+from .stages.correct import CorrectReport, accent_stretch, correct
+from .stages.extrapolate import extrapolate, gaussian_average, parse_duration
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping
@@ -144,6 +144,8 @@ def _extrapolate(state: State, config) -> State:
     positions[first:] = extrapolate(
         state.positions[first:], sigma=sigma, omega=config.omega, weights=weights,
         smooth=config.smooth_frames(frame_time), ramp=sigma, max_speed=config.max_speed,
+        still=config.still * skeleton.height() * frame_time,
+        torso=(torso_joints(skeleton, state.limbs), config.torso) if config.torso != 1 else None,
     )
     return replace(state, positions=positions)
 
@@ -151,10 +153,24 @@ def _extrapolate(state: State, config) -> State:
 def _correct(state: State, config) -> State:
     first = state.first
     skeleton = state.motion.skeleton
+    frame_time = state.motion.frame_time
+    smooth = parse_duration(config.smooth, frame_time, what="correct.smooth")
+    max_stretch = config.max_stretch
+    if config.accent_speed > 0 and max_stretch > 1:
+        max_stretch = accent_stretch(state.captured_pos[first:], frame_time, skeleton.height(),
+                                     max_stretch=max_stretch, accent_speed=config.accent_speed,
+                                     radius=max(int(round(smooth)), 1))
+    hard = None
+    if config.torso < 1:
+        hard = np.zeros(skeleton.num_joints, bool)
+        for name in ("spine", "neck"):
+            if name in state.limbs:
+                hard[list(state.limbs[name].joints[1:])] = True
+        max_stretch = np.broadcast_to(max_stretch, (len(state.positions) - first, skeleton.num_joints)).copy()
+        max_stretch[:, hard] = 1.0 + (max_stretch[:, hard] - 1.0) * config.torso
     body, report = correct(
         state.positions[first:], skeleton.parents, skeleton.link_lengths(), threshold=config.threshold,
-        delta=config.delta, max_stretch=config.max_stretch, max_iter=config.max_iter,
-        smooth=parse_duration(config.smooth, state.motion.frame_time, what="correct.smooth"),
+        delta=config.delta, max_stretch=max_stretch, max_iter=config.max_iter, smooth=smooth, hard=hard,
     )
     positions = state.positions.copy()
     positions[first:] = body
@@ -208,12 +224,31 @@ def _springs(state: State, config) -> State:
     hierarchy, positions = state.rubber()
     parents = hierarchy.skeleton.parents
     frame_time = state.motion.frame_time
-    links = spring_links(parents, ~hierarchy.rigid[hierarchy.link_child])
+    # Follow-through hangs off a solid body: the root, spine, neck, head, collars and the limbs' roots
+    # follow their (exaggerated) positions exactly; the arms and legs below the shoulder and hip swing.
+    # A lagging torso stretched more than the limbs (1.4x on a boxer's neck), which cartoon torsos do
+    # not (the Stretch-Engine thesis's Table 1), and a lagging collar spun the chest round.
+    skeleton = state.motion.skeleton
+    active = ~hierarchy.rigid[hierarchy.link_child]
+    limbs = [limb for name, limb in state.limbs.items() if name.endswith(("_arm", "_leg"))]
+    if limbs:
+        hanging = np.zeros(skeleton.num_joints, bool)
+        for limb in limbs:
+            hanging[limb_joints(skeleton, limb)] = True
+        hanging[[limb.base for limb in limbs]] = False
+        active &= hanging[hierarchy.link_child]
+    links = spring_links(parents, active)
     out = positions.copy()
     out[state.first:] = simulate_springs(
         positions[state.first:], parents, frame_time, stiffness=config.stiffness,
         link_stiffness=config.link_stiffness, damping=config.damping, blend=config.blend, links=links,
     )
+    # The root keeps its path and the follow-through hangs off it: a body that overshoots as a whole
+    # would bob for a second after every landing while the capture stands still. Only the slow part
+    # of the root's lag is taken out; the springs still smooth its jolts.
+    root = int(np.flatnonzero(parents < 0)[0])
+    if links.members.size:
+        out[:, links.members] -= (out[:, root] - positions[:, root])[:, None]
     substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
     carried = stable_link_stiffness(frame_time, config.link_stiffness, links.degree, substeps)
     notes = state.notes
@@ -433,6 +468,21 @@ def max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.nda
         return 1.0
     current = np.linalg.norm(positions[:, long_links] - positions[:, parents[long_links]], axis=-1)
     return float((current / lengths[long_links]).max())
+
+
+def torso_joints(skeleton: Skeleton, limbs: dict) -> np.ndarray:
+    """The torso: the spine chain and everything above it (neck, head, collars, shoulder balls), not the arms.
+
+    With no spine found, the neck chain (and what hangs off it) if there is one.
+    """
+    base = limbs["spine"].base if "spine" in limbs else limbs["neck"].base if "neck" in limbs else None
+    if base is None:
+        return np.zeros(0, dtype=np.int64)
+    torso = set(skeleton.descendants(base).tolist()) | {base}
+    for name, limb in limbs.items():
+        if name.endswith("_arm"):
+            torso -= set(limb_joints(skeleton, limb).tolist()) - {limb.base}
+    return np.array(sorted(torso), dtype=np.int64)
 
 
 def pipeline_limbs(skeleton: Skeleton, config: PipelineConfig) -> dict:
