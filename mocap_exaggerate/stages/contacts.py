@@ -511,12 +511,17 @@ def laplacian_deform(points: np.ndarray, end: np.ndarray, rest: np.ndarray, *, t
     return out
 
 
-def two_bone_ik(base: np.ndarray, middle: np.ndarray, end: np.ndarray, target: np.ndarray) -> np.ndarray:
+def two_bone_ik(base: np.ndarray, middle: np.ndarray, end: np.ndarray, target: np.ndarray,
+                bend: np.ndarray | None = None) -> np.ndarray:
     """The middle joint ``(F, 3)`` that lets a two-bone chain reach ``target`` (its end goes there).
 
     Both bones keep their current lengths while the target is within reach,
-    bending in the plane the chain bends in now; past reach (or closer than
-    the bones can fold) both bones scale together, as rubber would.
+    bending in the plane the chain bends in now, or in the plane of ``bend``
+    ``(F, 3, 3)`` (base, middle and end of a reference chain, the capture)
+    when given: an exaggerated leg that passes straight has no bend plane of
+    its own, and taking it from the chain swung the knee round in a frame.
+    Past reach (or closer than the bones can fold) both bones scale
+    together, as rubber would.
     """
     upper = np.linalg.norm(middle - base, axis=-1)
     lower = np.linalg.norm(end - middle, axis=-1)
@@ -524,12 +529,20 @@ def two_bone_ik(base: np.ndarray, middle: np.ndarray, end: np.ndarray, target: n
     distance = np.linalg.norm(reach, axis=-1)
     tiny = 1e-12
     direction = reach / np.maximum(distance, tiny)[:, None]
-    # The bend's side: the middle joint's offset from the base-end line, now.
-    now = end - base
-    now_dir = now / np.maximum(np.linalg.norm(now, axis=-1), tiny)[:, None]
-    turn = quat_between(now_dir, direction)
-    side = quat_rotate(turn, middle - base)
-    side = side - np.sum(side * direction, axis=-1, keepdims=True) * direction
+    # The bend's side: the middle joint's offset from the base-end line, now (and in the reference,
+    # which leads where it has one), projected across the new line. Not turned onto it: a turn is
+    # undefined as the line swings past a half turn (an exaggerated hip going past a planted
+    # ankle), a projection is not.
+    def offset(b, m, e):
+        line = e - b
+        line = line / np.maximum(np.linalg.norm(line, axis=-1), tiny)[:, None]
+        away = m - b
+        away = away - np.sum(away * line, axis=-1, keepdims=True) * line
+        return away - np.sum(away * direction, axis=-1, keepdims=True) * direction
+
+    side = offset(base, middle, end)
+    if bend is not None:
+        side = offset(bend[:, 0], bend[:, 1], bend[:, 2]) + 0.25 * side
     side_len = np.linalg.norm(side, axis=-1)
     fallback = np.cross(direction, np.eye(3)[np.argmin(np.abs(direction), axis=-1)])
     side = np.where((side_len > tiny)[:, None], side, fallback)
@@ -665,7 +678,7 @@ def constrain(
         g = goal(key.end)
         g += weight[:, None] * (out[:, original[key.base]] + key.vectors - g)
     for joint, g in goals.items():
-        _move_end(out, hierarchy, effectors[joint], g, rest)
+        _move_end(out, hierarchy, effectors[joint], g, rest, captured_pos)
 
     if config.enabled and config.floor:
         margin = 0.005 * ground.height
@@ -680,7 +693,7 @@ def constrain(
                 if not np.any(lift > 1e-6 * ground.height):
                     break
                 lift = _spread_lift(lift, ramp, pins.get(joint))
-                _move_end(out, hierarchy, effector, out[:, original[joint]] + lift[:, None] * up, rest)
+                _move_end(out, hierarchy, effector, out[:, original[joint]] + lift[:, None] * up, rest, captured_pos)
         moving = np.flatnonzero(~hierarchy.rigid[hierarchy.link_child])
         heights = ground.heights(out[:, moving])
         held = np.zeros(heights.shape)
@@ -713,7 +726,8 @@ def _spread_lift(lift: np.ndarray, ramp: float, pinned: np.ndarray | None) -> np
     return lift + (spread - lift) * (1.0 - pinned)
 
 
-def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, rest: np.ndarray) -> None:
+def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, rest: np.ndarray,
+              captured: np.ndarray) -> None:
     """Deform the effector's chain (in place) on the frames where its end must move."""
     chain = sub_chain(hierarchy, effector.chain)
     end = out[:, chain[-1]]
@@ -722,7 +736,8 @@ def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, 
         return
     points = out[frames][:, chain]
     if len(chain) == 3:
-        middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[frames])
+        bend = captured[frames][:, list(effector.chain)]
+        middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[frames], bend)
         new = np.stack([points[:, 0], middle, goal[frames]], axis=1)
     else:
         new = laplacian_deform(points, goal[frames], rest[chain])

@@ -126,7 +126,7 @@ class ExtrapolateConfig:
     enabled: bool = True
     sigma: str | float = "0.2s"
     omega: float = 5.0
-    smooth: str | float = "0.04s"
+    smooth: str | float = "0.05s"
     max_speed: float = 2.0
     still: float = 0.05
     torso: float = 1.0
