@@ -30,7 +30,7 @@ from .stages.correct import CorrectReport, accent_stretch, correct
 from .stages.extrapolate import extrapolate, gaussian_average, parse_duration
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
-from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping
+from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping, strike_scale
 from .stages.subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints, rubber_groups
 from .tpose import detect_rest_frames
 
@@ -191,11 +191,16 @@ def _stretch(state: State, plan: StretchPlan) -> State:
     motion, first = state.motion, state.first
     specs = list(plan.specs)
     notes = list(state.notes)
+    reaches: dict[tuple[str, int, int], float] = {}
     if plan.auto.enabled:
         # Strikes are found in the captured motion, not in its exaggeration.
         found = find_strikes(state.captured_pos[first:], motion.skeleton, state.limbs, motion.frame_time, plan.auto)
-        found = [spec.shifted(first) for spec in found]
-        notes += [f"auto-stretch: {s.limb} frames {s.start}-{s.end} x{s.scale:g}" for s in found]
+        styled = [spec.shifted(first) for spec in found]
+        found = [strike_scale(spec, state.positions, motion.skeleton, state.limbs, motion.frame_time)
+                 for spec in styled]
+        notes += [f"auto-stretch: {s.limb} frames {s.start}-{s.end} to {style.scale:g} limb lengths (x{s.scale:.3g})"
+                  for s, style in zip(found, styled)]
+        reaches = {(s.limb, int(s.start), int(s.end)): style.scale for s, style in zip(found, styled)}
         span = functools.partial(StretchSpec.span, frame_time=motion.frame_time, num_frames=motion.num_frames)
         for spec in found:  # the user's own events win over found ones
             if not overlapping(span(spec), [span(other) for other in specs if other.limb == spec.limb]):
@@ -205,6 +210,9 @@ def _stretch(state: State, plan: StretchPlan) -> State:
     positions = result.positions
     positions[:first] = state.positions[:first]
     for event in result.events:
+        reach = reaches.get((event["limb"], *event["frames"]))
+        if reach is not None:  # a found strike: its style is the reach it ends at, in limb lengths
+            event["reach"] = reach
         if event["axes_relaxed"]:
             notes.append(
                 f"stretch {event['limb']} frames {event['frames'][0]}-{event['frames'][1]}: the path cannot "

@@ -7,13 +7,14 @@ thesis then looks for the point P2 on the line from the path's final point P1
 to its scaled image P3 at which the limb is exactly S times as long as at P1
 (a line-sphere intersection here; the thesis uses the law of sines), which
 gives the effective scale S'. The original and S'-scaled paths are blended
-with the arc-length ratio from the origin, passed through an ease curve, and
-the limb follows the new path: the chain turns toward the new end and
+with the time ratio from the origin (the thesis: the arc-length ratio, which
+is the same at even speed; see `exaggerated_path`), passed through an ease
+curve, and the limb follows the new path: the chain turns toward the new end and
 stretches along its own axis, the hand or foot riding along.
 
 Beyond the thesis: a ``release`` after the range (before it, with the pivot
 at the end) lets the limb ease back instead of snapping to its captured
-length on the next frame.
+length on the next frame, leaving its peak at the speed it arrived with.
 """
 
 from __future__ import annotations
@@ -32,15 +33,19 @@ __all__ = [
     "StretchResult",
     "parse_stretch",
     "ease_curve",
+    "release_curve",
     "solve_effective_scale",
     "exaggerated_path",
     "apply_stretches",
     "MAX_SCALE",
     "AutoStretchConfig",
     "find_strikes",
+    "strike_scale",
     "overlapping",
 ]
 
+#: How long a stretched limb takes to come back after its range, unless the spec says.
+DEFAULT_RELEASE = "0.2s"
 #: The thesis's range of scale: 0 (fully squashed) to 5 (the extreme, a character pulled by a rocket).
 MAX_SCALE = 5.0
 _AXES = "xyz"
@@ -63,7 +68,8 @@ class StretchSpec:
     ease_in : (percent, value), percent in [0, 1], value in [0, 0.5], or None
     ease_out : (percent, value), percent in [0, 1], value in [0.5, 1], or None
     release : how long the limb takes to return to its captured length after
-        the range (before it with ``pivot = "end"``); 0 snaps back as in the thesis
+        the range (before it with ``pivot = "end"``), leaving the peak at the
+        speed it reached it; 0 snaps back as in the thesis
     """
 
     limb: str
@@ -75,7 +81,7 @@ class StretchSpec:
     blend: float = 1.0
     ease_in: tuple[float, float] | None = None
     ease_out: tuple[float, float] | None = None
-    release: str | float = "0.1s"
+    release: str | float = DEFAULT_RELEASE
 
     def __post_init__(self) -> None:
         where = f"stretch {self.limb}"
@@ -258,9 +264,10 @@ def exaggerated_path(path: np.ndarray, base_at_final: np.ndarray, spec: StretchS
     mask = np.array([a in spec.axes for a in _AXES])
     effective, end_point, exact = solve_effective_scale(base_at_final, origin, final, spec.scale, mask)
     scaled = np.where(mask, origin + effective * (ordered - origin), ordered)
-    steps = np.linalg.norm(np.diff(ordered, axis=0), axis=1)
-    along = np.concatenate([[0.0], np.cumsum(steps)])
-    ratio = along / along[-1] if along[-1] > 0 else np.linspace(0.0, 1.0, len(ordered))
+    # The thesis blends by the arc-length ratio from the origin. By time instead: the same on a path
+    # travelled at even speed, but where the end stops dead (a kick meeting the ball) an arc-length
+    # weight stops with it, and the stretch's acceleration there was 4x the captured kick's.
+    ratio = np.linspace(0.0, 1.0, len(ordered)) if len(ordered) > 1 else np.ones(1)
     if not exact and spec.scale != 1.0:
         # The chosen axes cannot bring the end to S times the length (a squash across
         # the motion): keep the limb length promise by ending on the limb's own axis,
@@ -289,9 +296,29 @@ class StretchResult:
     trails: list[dict] = field(default_factory=list)
 
 
-def _smoothstep(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * (3.0 - 2.0 * x)
+def release_curve(shift: np.ndarray, frames: int) -> np.ndarray:
+    """The displacement ``(frames, 3)`` after a stretch whose displacement over its range was ``shift (n, 3)``.
+
+    A cubic Hermite from the last displacement and its velocity (one frame's
+    change) to rest at 0 on the frame after the release: the limb leaves its
+    peak at the speed it reached it and settles without a snap (a smoothstep
+    from a standing start stopped it dead on the peak frame, a pop of four
+    times the captured acceleration on a kicking foot).
+
+    >>> release_curve(np.array([[0.0, 0, 0], [1.0, 0, 0]]), 3)[:, 0].round(3).tolist()
+    [0.984, 0.625, 0.203]
+    """
+    last = shift[-1]
+    velocity = shift[-1] - shift[-2] if len(shift) > 1 else np.zeros(3)
+    span = frames + 1.0
+    # A range that ends mid-swing would carry on well past its peak: at most one peak's worth over the
+    # release (an overshoot of at most 15 %). A strike ends at its greatest reach, nearly at rest.
+    size = np.linalg.norm(velocity) * span
+    velocity = velocity * min(1.0, np.linalg.norm(last) / size) if size > 0 else velocity
+    s = np.arange(1, frames + 1, dtype=np.float64)[:, None] / span
+    h00 = 2.0 * s**3 - 3.0 * s**2 + 1.0
+    h10 = s**3 - 2.0 * s**2 + s
+    return h00 * last + h10 * span * velocity
 
 
 def apply_stretches(
@@ -344,13 +371,12 @@ def apply_stretches(
             new_path[index[inside]] = np.asarray(edit_pos, dtype=np.float64)[inside]
         target = world_pos[:, end].copy()
         target[first : last + 1] = new_path
-        # Release: the displacement at the final frame fades out smoothly.
+        # Release: the displacement leaves the range with the speed it had and comes to rest at 0.
+        shift = new_path - world_pos[first : last + 1, end]
         if spec.pivot == "start" and hi > last:
-            fade = 1.0 - _smoothstep((np.arange(last + 1, hi + 1) - last) / (hi - last + 1))
-            target[last + 1 : hi + 1] += fade[:, None] * (new_path[-1] - world_pos[last, end])
+            target[last + 1 : hi + 1] += release_curve(shift, hi - last)
         if spec.pivot == "end" and lo < first:
-            fade = _smoothstep((np.arange(lo, first) - lo + 1) / (first - lo + 1))
-            target[lo:first] += fade[:, None] * (new_path[0] - world_pos[first, end])
+            target[lo:first] += release_curve(shift[::-1], first - lo)[::-1]
         span = slice(lo, hi + 1)
         _follow(world_pos, skeleton, limb, target, span)
         events.append({
@@ -414,16 +440,22 @@ def _follow(world_pos: np.ndarray, skeleton, limb, target: np.ndarray, span: sli
 class AutoStretchConfig:
     """Automatic stretch events: strikes found in the motion get the style's scale.
 
-    A strike is a punch, kick, throw or leap: an arm or leg end effector that
-    speeds up (relative to the body) to a peak of at least ``min_speed`` limb
-    lengths per second and ``speed_factor`` times its median speed, and then
-    reaches out to at least ``min_reach`` of the limb's full length, having
-    straightened by at least ``min_extension`` of it on the way. The
-    event runs from where the speed first rises past half its peak to the
-    frame of greatest reach; its scale is the style's ``arm`` or ``leg``.
+    A strike is a punch, kick, throw or leap, found by its shape: an arm or
+    leg straightening fast toward full reach. Its reach (base to end over the
+    limb's full length) peaks at ``min_reach`` or more, having risen within
+    ``window`` seconds either by ``min_extension`` at ``min_rate`` limb
+    lengths per second at its fastest (a punch: the arm unfolds), or by half
+    that while its end flies at ``min_speed`` limb lengths per second relative
+    to the root (a kick: the leg is nearly straight already and swings from
+    the hip). Nothing is relative to the clip's other moves, so a clip made
+    only of punches finds them all. The event runs from where the extension
+    starts (its rate past a quarter of its peak) to the frame of greatest
+    reach; back-to-back strikes (a one-two) shorten the first one's release.
 
-    arm, leg, spine, neck : the style's range of scale per limb (the
-        thesis: limbs about 2, torso at most the limbs, 5 the extreme)
+    arm, leg, spine, neck : the style's range of scale per limb: the limb's
+        length at the strike's end, in limb lengths (2: the arm reaches
+        twice its length, whatever the exaggeration had already made of it;
+        the thesis: limbs about 2, torso at most the limbs, 5 the extreme)
     """
 
     enabled: bool = False
@@ -431,10 +463,11 @@ class AutoStretchConfig:
     leg: float = 2.0
     spine: float = 1.5
     neck: float = 1.5
-    min_speed: float = 5.0
-    speed_factor: float = 3.0
+    min_rate: float = 3.0
+    min_speed: float = 8.0
     min_reach: float = 0.85
-    min_extension: float = 0.15
+    min_extension: float = 0.3
+    window: float = 0.4
     axes: str = "xyz"
     ease_in: tuple[float, float] | None = (0.5, 0.25)
 
@@ -448,10 +481,11 @@ class AutoStretchConfig:
                 "auto_stretch: the torso (spine, neck) should stretch no more than the limbs (arm, leg), "
                 f"got spine {self.spine:g}, neck {self.neck:g}, arm {self.arm:g}, leg {self.leg:g}"
             )
-        check_number("auto_stretch.min_speed", self.min_speed, 0, 100)
-        check_number("auto_stretch.speed_factor", self.speed_factor, 1, 100)
+        check_number("auto_stretch.min_rate", self.min_rate, 0, 100)
+        check_number("auto_stretch.min_speed", self.min_speed, 0, 1000)
         check_number("auto_stretch.min_reach", self.min_reach, 0, 1)
         check_number("auto_stretch.min_extension", self.min_extension, 0, 1)
+        check_number("auto_stretch.window", self.window, 0.05, 5)
         if isinstance(self.ease_in, list):
             object.__setattr__(self, "ease_in", tuple(self.ease_in))
         StretchSpec(limb="check", start=0, end=1, scale=self.arm, axes=self.axes, ease_in=self.ease_in)
@@ -459,15 +493,21 @@ class AutoStretchConfig:
 
 def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float,
                  config: AutoStretchConfig) -> list[StretchSpec]:
-    """Stretch events for the strikes in ``world_pos (F, J, 3)`` (frame numbers relative to it)."""
-    from scipy.ndimage import gaussian_filter1d
-    from scipy.signal import find_peaks
+    """Stretch events for the strikes in ``world_pos (F, J, 3)`` (frame numbers relative to it).
+
+    The scale of each is the style's (``config.arm`` or ``config.leg``): the
+    limb's reach at the strike's end in limb lengths; `strike_scale` turns it
+    into a factor on whatever reach the motion being stretched has there.
+    """
+    from .extrapolate import gaussian_average
 
     frames = world_pos.shape[0]
     if frames < 8:
         return []
     specs = []
     lengths = skeleton.link_lengths()
+    window = max(3, int(round(config.window / frame_time)))
+    release = int(round(parse_duration(DEFAULT_RELEASE, frame_time)))
     for name, limb in limbs.items():
         if not name.endswith(("_arm", "_leg")):
             continue
@@ -475,29 +515,57 @@ def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float
         if full <= 0:
             continue
         reach = np.linalg.norm(world_pos[:, limb.end] - world_pos[:, limb.base], axis=-1) / full
-        relative = world_pos[:, limb.end] - world_pos[:, 0]
-        velocity = gaussian_filter1d(np.gradient(relative, frame_time, axis=0), 1.5, axis=0, mode="nearest")
-        speed = np.linalg.norm(velocity, axis=-1) / full  # limb lengths per second
-        floor = max(config.min_speed, config.speed_factor * float(np.median(speed)))
-        peaks, _ = find_peaks(speed, height=floor, distance=max(1, int(0.3 / frame_time)))
-        window = max(2, int(0.35 / frame_time))
-        release = int(round(0.1 / frame_time))
+        reach = gaussian_average(reach, 0.015 / frame_time)  # capture jitter is not a strike
+        rate = np.gradient(reach, frame_time)
+        flight = gaussian_average(world_pos[:, limb.end] - world_pos[:, 0], 0.015 / frame_time)
+        speed = np.linalg.norm(np.gradient(flight, frame_time, axis=0), axis=-1) / full
+        # Peaks: the greatest reach of their own neighbourhood (a quarter of the window either side).
+        near = max(1, window // 4)
+        padded = np.pad(reach, near, mode="edge")
+        highest = np.lib.stride_tricks.sliding_window_view(padded, 2 * near + 1).max(axis=-1)
+        peaks = np.flatnonzero((reach >= highest) & (reach >= config.min_reach))
+        peaks = peaks[np.concatenate([[True], np.diff(peaks) > near])]  # a flat top counts once
+        candidates = []
+        for peak in peaks:
+            lo = max(0, peak - window)
+            start = lo + int(np.argmin(reach[lo : peak + 1]))
+            fastest = float(rate[start : peak + 1].max(initial=0.0))
+            rise = reach[peak] - reach[start]
+            unfolds = rise >= config.min_extension and fastest >= config.min_rate
+            swings = rise >= 0.5 * config.min_extension and speed[start : peak + 1].max() >= config.min_speed
+            if not (unfolds or swings):
+                continue
+            while start < peak and rate[start] < 0.25 * fastest:  # where the extension gets going
+                start += 1
+            start = max(start - 1, lo)
+            if peak - start >= 3:
+                candidates.append((fastest, int(start), int(peak)))
         chosen: list[tuple[int, int]] = []
-        for peak in sorted(peaks, key=lambda p: -speed[p]):
-            stop = min(frames - 1, peak + window)
-            end = peak + int(np.argmax(reach[peak : stop + 1]))
-            if reach[end] < config.min_reach:
-                continue
-            start = peak
-            while start > 0 and speed[start - 1] > 0.5 * speed[peak] and peak - start < window:
-                start -= 1
-            if reach[end] - reach[start:end + 1].min() < config.min_extension:
-                continue
-            if end - start < 3 or overlapping((start, end + release), [(a, b + release) for a, b in chosen]):
-                continue
-            chosen.append((start, end))
+        for _, start, end in sorted(candidates, reverse=True):  # the fastest first
+            if not overlapping((start - 1, end + 1), chosen):
+                chosen.append((start, end))
+        chosen.sort()
         scale = config.arm if name.endswith("_arm") else config.leg
-        for start, end in sorted(chosen):
-            specs.append(StretchSpec(limb=name, start=int(start), end=int(end), scale=scale, axes=config.axes,
-                                     ease_in=config.ease_in, release="0.1s"))
+        for k, (start, end) in enumerate(chosen):
+            gap = chosen[k + 1][0] - end - 1 if k + 1 < len(chosen) else release
+            specs.append(StretchSpec(limb=name, start=start, end=end, scale=scale, axes=config.axes,
+                                     ease_in=config.ease_in, release=f"{min(release, gap)}f"))
     return specs
+
+
+def strike_scale(spec: StretchSpec, world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float) -> StretchSpec:
+    """A found strike with its scale turned from "reach in limb lengths" into a factor on ``world_pos``.
+
+    The exaggeration has already lengthened the limb at the strike's end: a
+    2x style on an arm the extrapolation made 1.6x long would reach 3.2x.
+    The factor that makes it reach ``spec.scale`` limb lengths instead is
+    ``scale * full / reach``, and never below 1 (a strike does not squash).
+    """
+    limb = limbs[spec.limb]
+    full = float(sum(skeleton.link_lengths()[j] for j in limb.joints[1:]))
+    first, last = spec.frames(frame_time, world_pos.shape[0])
+    key = first if spec.pivot == "end" else last
+    reach = float(np.linalg.norm(world_pos[key, limb.end] - world_pos[key, limb.base]))
+    if reach <= 0 or full <= 0:
+        return spec
+    return replace(spec, scale=float(min(MAX_SCALE, max(1.0, spec.scale * full / reach))))
