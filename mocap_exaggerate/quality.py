@@ -1,0 +1,131 @@
+"""Does an output read as animation or as noise? Figures comparing a result with its capture.
+
+`motion_quality` measures what an animator sees (h = skeleton height; every frame counts,
+rest frames included, so a pop where the rest pose ends shows):
+
+- ``jerk_ratio``: the 99th percentile over (frame, original joint) of |third difference of
+  world position| on the output, over the same on the capture.
+- ``jump_ratio``: per original joint, the largest one-frame move on the output over the
+  largest on the capture; the worst joint (``jump_joint``, ``jump_frame``). Joints whose
+  captured largest move is under 0.1 % h are left out.
+- ``flips``: (sub-)joint frames whose written local rotation turns more than 60 degrees in
+  one frame while the captured joints at both ends of its link turn less than 30 degrees.
+- ``stretch``: per limb, its length along the output skeleton (through its sub-joints) over
+  its rest length: ``peak``, ``p95`` and ``above`` (share of frames over 1.5x); ``links`` is
+  the largest ratio of any original link's straight length to its rest length;
+  ``torso_within_limbs`` whether the spine's and neck's peaks are at most every arm's and
+  leg's peak.
+- ``drift`` (h/s): the mean speed of the root on frames where the captured root moves slower
+  than 0.1 h/s for at least 0.5 s (None when there are none), and ``drift_captured``.
+
+``bench/quality.py`` prints them for every shared clip and preset; the tests hold the
+presets to them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .limbs import find_limbs
+from .motion import Motion
+from .rotations import quat_inv, quat_mul
+
+__all__ = ["motion_quality", "turn_degrees", "still_frames", "STRETCHED"]
+
+#: A limb longer than this many times its rest length counts as stretched.
+STRETCHED = 1.5
+
+
+def turn_degrees(local: np.ndarray) -> np.ndarray:
+    """(F-1, J) angle in degrees each joint's rotation turns from one frame to the next."""
+    relative = quat_mul(quat_inv(local[:-1]), local[1:])
+    w = np.clip(np.abs(relative[..., 3]), 0.0, 1.0)
+    return np.degrees(2.0 * np.arccos(w))
+
+
+def still_frames(captured: np.ndarray, frame_time: float, height: float) -> np.ndarray:
+    """(F,) frames inside a run of at least 0.5 s where the captured root is slower than 0.1 h/s."""
+    if len(captured) < 2:
+        return np.zeros(len(captured), bool)
+    speed = np.linalg.norm(np.gradient(captured[:, 0], frame_time, axis=0), axis=-1) / height
+    still = speed < 0.1
+    shortest = int(round(0.5 / frame_time))
+    out = np.zeros_like(still)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
+    for start, end in zip(edges[::2], edges[1::2]):
+        if end - start >= shortest:
+            out[start:end] = True
+    return out
+
+
+def _path(parents: np.ndarray, base: int, end: int) -> list[int]:
+    """Joints from ``end`` up to (not including) ``base``: each ends one link of the path."""
+    path, joint = [], end
+    while joint != base and joint >= 0:
+        path.append(joint)
+        joint = int(parents[joint])
+    if joint != base:
+        raise ValueError("base is not above end")
+    return path
+
+
+def motion_quality(motion: Motion, result) -> dict:
+    """The figures above for a `PipelineResult` of ``motion`` (the captured clip it was run on)."""
+    skeleton, dt = motion.skeleton, motion.frame_time
+    h = skeleton.height()
+    cap = motion.world_positions()
+    out_all = result.world_positions
+    out = out_all[:, result.original_index]
+
+    def jerk(p):
+        return np.linalg.norm(np.diff(p, 3, axis=0), axis=-1)
+
+    jerk_ratio = float(np.percentile(jerk(out), 99) / max(np.percentile(jerk(cap), 99), 1e-12)) \
+        if len(cap) > 3 else 1.0
+    cap_jump = np.linalg.norm(np.diff(cap, axis=0), axis=-1).max(axis=0, initial=0.0)
+    out_jump = np.linalg.norm(np.diff(out, axis=0), axis=-1).max(axis=0, initial=0.0)
+    ratios = np.where(cap_jump > 1e-3 * h, out_jump / np.maximum(cap_jump, 1e-12), 0.0)
+    worst = int(np.argmax(ratios))
+    worst_frame = int(np.argmax(np.linalg.norm(np.diff(out[:, worst], axis=0), axis=-1))) if len(out) > 1 else 0
+
+    out_skeleton = result.motion.skeleton
+    turns = turn_degrees(result.motion.local_rotations)
+    cap_turns = turn_degrees(motion.local_rotations)
+    if result.hierarchy is not None and out_skeleton.num_joints != skeleton.num_joints:
+        ends = np.stack([result.hierarchy.link_parent, result.hierarchy.link_child], axis=1)
+        ends = np.where(ends < 0, ends[:, 1:2], ends)
+        reference = cap_turns[:, ends].max(axis=2)
+    else:
+        reference = cap_turns
+    flips = (turns > 60.0) & (reference < 30.0)
+
+    rest = skeleton.link_lengths()
+    stretch = {}
+    for name, limb in find_limbs(skeleton).items():
+        rest_length = sum(rest[j] for j in _path(skeleton.parents, limb.base, limb.end))
+        if rest_length <= 1e-6 * h:
+            continue
+        chain = _path(out_skeleton.parents, int(result.original_index[limb.base]), int(result.original_index[limb.end]))
+        length = np.linalg.norm(out_all[:, chain] - out_all[:, out_skeleton.parents[chain]], axis=-1).sum(axis=1)
+        ratio = length / rest_length
+        stretch[name] = {"peak": float(ratio.max()), "p95": float(np.percentile(ratio, 95)),
+                         "above": float(np.mean(ratio > STRETCHED))}
+    long_links = rest > 1e-3 * h
+    long_links[0] = False
+    links = np.linalg.norm(out[:, long_links] - out[:, skeleton.parents[long_links]], axis=-1) / rest[long_links]
+
+    still = still_frames(cap, dt, h)
+    root = int(result.original_index[0])
+
+    def drift(p):
+        return float((np.linalg.norm(np.gradient(p, dt, axis=0), axis=-1)[still] / h).mean()) if still.any() else None
+
+    limb_peaks = [v["peak"] for k, v in stretch.items() if k.endswith(("_arm", "_leg"))]
+    torso_peaks = [v["peak"] for k, v in stretch.items() if k in ("spine", "neck")]
+    return {
+        "jerk_ratio": jerk_ratio,
+        "jump_ratio": float(ratios[worst]), "jump_joint": skeleton.names[worst], "jump_frame": worst_frame,
+        "flips": int(flips.sum()), "stretch": stretch, "links": float(links.max()) if links.size else 1.0,
+        "torso_within_limbs": (max(torso_peaks) <= min(limb_peaks) + 1e-9) if torso_peaks and limb_peaks else None,
+        "drift": drift(out_all[:, root]), "drift_captured": drift(cap[:, 0]),
+    }
