@@ -395,6 +395,8 @@ def prepare(motion: Motion, config: InputConfig | None = None, *, limbs: dict | 
             paths: dict | None = None) -> State:
     """The state the stages start from: forward kinematics, rest frames found (and dropped if asked)."""
     config = config or InputConfig()
+    if config.fps is not None and abs(motion.fps - config.fps) > 1e-9 * config.fps:
+        motion = motion.replace(frame_time=1.0 / config.fps)  # what the reader does with --fps
     world_rot, world = motion.forward_kinematics()
     rest = detect_rest_frames(motion, world) if config.tpose in ("auto", "drop") else 0
     dropped = config.tpose == "drop" and rest > 0
