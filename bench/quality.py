@@ -44,6 +44,7 @@ def measure(path: Path, preset: str, config=None) -> dict:
             "rest_frames": result.rest_frames, **motion_quality(motion, result)}
 
 
+
 def cell(value, fmt: str = ".2f") -> str:
     return "-" if value is None else format(value, fmt)
 

@@ -7,7 +7,7 @@ rest frames included, so a pop where the rest pose ends shows):
   world position| on the output, over the same on the capture.
 - ``jump_ratio``: per original joint, the largest one-frame move on the output over the
   largest on the capture; the worst joint (``jump_joint``, ``jump_frame``). Joints whose
-  captured largest move is under 0.1 % h are left out.
+  captured largest move is under 0.1 % h are left out (``jumps``: every joint's ratio, 0 for those).
 - ``flips``: (sub-)joint frames whose written local rotation turns more than 60 degrees in
   one frame while the captured joints at both ends of its link turn less than 30 degrees.
 - ``stretch``: per limb, its length along the output skeleton (through its sub-joints) over
@@ -125,6 +125,7 @@ def motion_quality(motion: Motion, result) -> dict:
     return {
         "jerk_ratio": jerk_ratio,
         "jump_ratio": float(ratios[worst]), "jump_joint": skeleton.names[worst], "jump_frame": worst_frame,
+        "jumps": ratios.tolist(),
         "flips": int(flips.sum()), "stretch": stretch, "links": float(links.max()) if links.size else 1.0,
         "torso_within_limbs": (max(torso_peaks) <= min(limb_peaks) + 1e-9) if torso_peaks and limb_peaks else None,
         "drift": drift(out_all[:, root]), "drift_captured": drift(cap[:, 0]),

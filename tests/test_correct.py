@@ -4,8 +4,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mocap_exaggerate.io.bvh import read_bvh
-from mocap_exaggerate.stages.correct import CorrectConfig, correct, stretch_error
-from mocap_exaggerate.stages.extrapolate import extrapolate
+from mocap_exaggerate.stages.correct import CorrectConfig, accent_stretch, correct, stretch_error
+from mocap_exaggerate.stages.extrapolate import extrapolate, spread_max
 
 from .helpers import shared
 
@@ -120,3 +120,83 @@ def test_on_the_longest_real_clip():
 def test_config_validates_naming_the_field(field, value):
     with pytest.raises(ValueError, match=f"correct.{field}"):
         CorrectConfig(**{field: value})
+
+
+# ---------------------------------------------------------------------------- issue 11: smooth in time
+
+
+def _exaggerated(sample_clip, omega=5.0):
+    motion = read_bvh(sample_clip)[0]
+    world = motion.world_positions()
+    return motion, extrapolate(world, sigma=0.2 / motion.frame_time, omega=omega)
+
+
+@pytest.mark.parametrize("threshold", [0.0, 0.03])
+def test_smooth_correction_keeps_the_threshold_and_leaves_far_frames_alone(sample_clip, threshold):
+    motion, world = _exaggerated(sample_clip)
+    parents, lengths = motion.skeleton.parents, motion.skeleton.link_lengths()
+    radius = 12
+    out, report = correct(world, parents, lengths, threshold=threshold, max_stretch=1.1, smooth=radius)
+    assert np.all(stretch_error(out, parents, lengths, max_stretch=1.1) <= threshold + 1e-9)
+    over = stretch_error(world, parents, lengths, max_stretch=1.1) > threshold
+    near = np.convolve(over, np.ones(4 * radius + 1), mode="same") > 0  # within 2 radii of a frame over it
+    assert np.array_equal(out[~near], world[~near]) and report.frames_corrected >= over.sum()
+    assert np.array_equal(out[:, 0], world[:, 0])  # the root never moves
+
+
+def test_smooth_correction_pulls_back_smoothly():
+    # The laugh: a frame just over the threshold is pulled back and its neighbour is not, and
+    # neighbours needing 3 or 4 halvings keep 1/8 or 1/16 of their excess: jerk, frame by frame.
+    motion = read_bvh(shared("cmu_14_19_laugh_idle_daz.bvh"))[0]
+    world = extrapolate(motion.world_positions(), sigma=0.2 / motion.frame_time, omega=5.0, smooth=6.0)
+    parents, lengths = motion.skeleton.parents, motion.skeleton.link_lengths()
+
+    def jerk(out):  # the 99th percentile of |third difference| over frames and joints
+        return np.percentile(np.linalg.norm(np.diff(out, 3, axis=0), axis=-1), 99)
+
+    paper, _ = correct(world, parents, lengths, threshold=0.03, max_stretch=1.1)
+    smooth, _ = correct(world, parents, lengths, threshold=0.03, max_stretch=1.1, smooth=12)
+    assert jerk(smooth) < 0.4 * jerk(paper), (jerk(smooth), jerk(paper))  # measured 0.67 vs 3.56
+    assert jerk(smooth) < 1.2 * jerk(world)  # barely more than the exaggeration's own
+
+
+def test_free_stretch_only_at_accents():
+    fps, height = 100.0, 170.0
+    t = np.arange(0.0, 2.0, 1.0 / fps)
+    captured = np.zeros((len(t), 3, 3))
+    captured[:, 1] = [0.0, 50.0, 0.0]  # a joint that stays put relative to the root
+    x = np.clip((t - 1.0) / 0.1, 0.0, 1.0)
+    captured[:, 2, 0] = 0.5 * height * x  # a hand thrown half a body height in 0.1 s: 5 h/s
+    limits = accent_stretch(captured, 1 / fps, height, max_stretch=1.5, accent_speed=3.0, radius=5)
+    assert np.all(limits[:, 1] == 1.0) and np.all(limits[:50, 2] == 1.0)  # held: rest length only
+    assert limits[105, 2] == pytest.approx(1.5)  # the fast middle of the throw: all of it
+    assert np.all(np.diff(limits[:105, 2]) >= 0)  # and it builds up smoothly before
+
+
+def test_held_links_never_stretch_past_their_free_length(sample_clip):
+    motion, world = _exaggerated(sample_clip)
+    parents, lengths = motion.skeleton.parents, motion.skeleton.link_lengths()
+    hard = np.zeros(len(parents), bool)
+    hard[[3, 4, 5]] = True
+    for smooth in (0, 12):
+        out, _ = correct(world, parents, lengths, threshold=10.0, max_stretch=1.05, smooth=smooth, hard=hard)
+        ratio = np.linalg.norm(out[:, hard] - out[:, parents[hard]], axis=-1) / lengths[hard]
+        assert ratio.max() <= 1.05 + 1e-9
+        others = ~hard
+        others[0] = False
+        assert np.array_equal(out[:, 0], world[:, 0])
+        # a threshold of 10 corrects nothing else
+        assert np.allclose(np.linalg.norm(out[:, others] - out[:, parents[others]], axis=-1),
+                           np.linalg.norm(world[:, others] - world[:, parents[others]], axis=-1))
+
+
+@given(values=st.lists(st.floats(0.0, 1.0), min_size=2, max_size=60), radius=st.integers(1, 6))
+@settings(max_examples=200, deadline=None)
+def test_spread_max_is_never_below_its_input_and_zero_two_radii_away(values, radius):
+    values = np.array(values)
+    spread = spread_max(values, radius)
+    assert np.all(spread >= values)
+    nonzero = np.flatnonzero(values > 0)
+    frames = np.arange(len(values))
+    far = np.all(np.abs(frames[:, None] - nonzero[None, :]) > 2 * radius, axis=1) if len(nonzero) else np.ones(len(values), bool)
+    assert np.all(spread[far] == 0.0)

@@ -105,3 +105,95 @@ def test_gaussian_average_equals_scipys_filter_on_the_padded_clip(sample_clip, s
     padded = np.pad(world, [(radius, radius), (0, 0), (0, 0)], mode="reflect", reflect_type="odd")
     expected = gaussian_filter1d(padded, sigma, axis=0, mode="nearest", truncate=4.0)[radius:-radius]
     np.testing.assert_allclose(gaussian_average(world, sigma), expected, rtol=0, atol=1e-9 * np.abs(world).max())
+
+
+# ---------------------------------------------------------------------------- issue 11: a band, not the noise
+
+
+def _swing_and_jitter(fps=120.0, seconds=4.0, seed=11):
+    t = np.arange(0.0, seconds, 1.0 / fps)
+    swing = np.sin(2 * np.pi * 0.8 * t)  # a 1.25 s swing
+    jitter = np.random.default_rng(seed).normal(scale=0.002, size=t.shape)  # marker noise
+    world = np.zeros((len(t), 1, 3))
+    world[:, 0, 0] = swing
+    return world, jitter
+
+
+def test_jitter_passes_through_unamplified_while_the_swing_is_exaggerated():
+    world, jitter = _swing_and_jitter()
+    noisy = world.copy()
+    noisy[:, 0, 0] += jitter
+    sigma, smooth = 0.2 * 120, 0.05 * 120
+    core = slice(2 * int(sigma), -2 * int(sigma))  # away from the reflected ends
+    band = extrapolate(world, sigma=sigma, omega=4.0, smooth=smooth)
+    # The swing: its deviation from a 0.2 s average, (1 - 0.60) of it, amplified 3x on top: about 2.1x.
+    assert np.abs(band[core, 0, 0]).max() > 1.8
+    # The jitter: what the noisy clip adds to the output, compared with the jitter itself.
+    added = extrapolate(noisy, sigma=sigma, omega=4.0, smooth=smooth)[core, 0, 0] - band[core, 0, 0]
+    paper = extrapolate(noisy, sigma=sigma, omega=4.0)[core, 0, 0] - extrapolate(world, sigma=sigma, omega=4.0)[core, 0, 0]
+    assert np.std(added) < 1.25 * np.std(jitter[core])  # passed through, barely touched
+    assert np.std(paper) > 3.0 * np.std(jitter[core])  # eq. (1) multiplies it by nearly omega
+
+
+def test_the_exaggeration_fades_in_at_the_first_frame_and_out_at_the_last():
+    world, _ = _swing_and_jitter()
+    world = world + np.array([0.0, 0.0, 3.0])  # start mid-swing, away from the origin
+    world[:, 0, 0] += 0.3
+    out = extrapolate(world, sigma=24.0, omega=5.0, smooth=6.0, ramp=24.0)
+    assert np.array_equal(out[0], world[0]) and np.array_equal(out[-1], world[-1])
+    # No jump where a kept rest pose would end: the first steps are the capture's, give or take.
+    steps = np.linalg.norm(np.diff(out[:4, 0], axis=0), axis=-1)
+    captured = np.linalg.norm(np.diff(world[:4, 0], axis=0), axis=-1)
+    assert np.all(steps <= 1.1 * captured + 1e-12)
+    assert np.abs(out[48:-48] - world[48:-48]).max() > 0.5  # and in between it is exaggerated
+
+
+@pytest.mark.parametrize("max_speed", [1.5, 2.0])
+def test_no_joint_moves_faster_than_max_speed_times_its_own_top_captured_speed(sample_clip, max_speed):
+    world = read_bvh(sample_clip)[0].world_positions()
+    out = extrapolate(world, sigma=24.0, omega=5.0, smooth=6.0, max_speed=max_speed)
+    top = np.linalg.norm(np.diff(world, axis=0), axis=-1).max(axis=0)
+    fastest = np.linalg.norm(np.diff(out, axis=0), axis=-1).max(axis=0)
+    moving = top > 1e-9
+    assert np.all(fastest[moving] <= (max_speed + 0.02) * top[moving])
+    free = extrapolate(world, sigma=24.0, omega=5.0, smooth=6.0)
+    assert (np.linalg.norm(np.diff(free, axis=0), axis=-1).max(axis=0)[moving] / top[moving]).max() > max_speed + 0.2
+    # The extremes of the poses keep most of their exaggeration.
+    assert np.abs(out - world).mean() > 0.6 * np.abs(free - world).mean()
+
+
+def test_a_joint_standing_still_stays_where_it_was_captured():
+    fps, sigma = 120.0, 0.3 * 120
+    t = np.arange(0.0, 6.0, 1.0 / fps)
+    x = np.clip((t - 2.5) / 0.5, 0.0, 1.0)  # still 2.5 s, a half-second move, still again
+    world = np.zeros((len(t), 1, 3))
+    world[:, 0, 0] = 10.0 * x * x * (3 - 2 * x)
+    still = 0.05 * 170.0 / fps  # 0.05 body heights a second for a 170-unit body, per frame
+    out = extrapolate(world, sigma=sigma, omega=5.0, smooth=6.0, still=still)
+    plain = extrapolate(world, sigma=sigma, omega=5.0, smooth=6.0)
+    waiting = (t < 2.5 - 2.2 * sigma / fps) | (t > 3.0 + 2.2 * sigma / fps)
+    assert np.abs(plain[waiting] - world[waiting]).max() > 0.05  # the average drifts over the wait...
+    assert np.array_equal(out[waiting], world[waiting])  # ...the joint does not
+    assert np.abs(out - world).max() > 1.0  # and the move itself is exaggerated (anticipation, overshoot)
+
+
+def test_the_torso_rides_with_the_root_and_swings_a_share_of_its_own():
+    world, _ = _swing_and_jitter()
+    root = world[:, 0]
+    body = np.stack([root, root + [0.0, 5.0, 0.0], root + [0.0, 5.0, 0.0] + world[:, 0] * [0.0, 0.0, 0.5]], axis=1)
+    out = extrapolate(body, sigma=24.0, omega=5.0, smooth=6.0, torso=(np.array([1, 2]), 0.5))
+    free = extrapolate(body, sigma=24.0, omega=5.0, smooth=6.0)
+    # Joint 1 moves exactly as the root: it keeps its offset, whatever the torso share.
+    assert np.allclose(out[:, 1] - out[:, 0], [0.0, 5.0, 0.0])
+    # Joint 2's own swing (along z) is exaggerated half as much.
+    own, free_own = out[:, 2, 2] - body[:, 2, 2], free[:, 2, 2] - body[:, 2, 2]
+    assert np.allclose(own, 0.5 * free_own)
+
+
+def test_smooth_and_max_speed_are_checked():
+    assert ExtrapolateConfig(smooth="0s", max_speed=0).max_speed == 0
+    for bad in ({"max_speed": 0.5}, {"smooth": "-1s"}, {"still": -1.0}, {"torso": float("nan")}):
+        with pytest.raises(ConfigError, match="extrapolate"):
+            ExtrapolateConfig(**bad)
+    # smooth never takes the whole band: at most half of sigma is used.
+    assert ExtrapolateConfig(sigma="0.04s", smooth="0.05s").smooth_frames(1 / 100) == pytest.approx(2.0)

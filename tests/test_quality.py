@@ -1,0 +1,62 @@
+"""Issue 11's done-means on every shared clip: motion that reads as animation, presets that keep their word.
+
+The figures are `mocap_exaggerate.quality.motion_quality` (``bench/quality.py`` prints them
+all). Skipped, saying why, where ../shared/data is absent.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocap_exaggerate import load_preset
+from mocap_exaggerate.io.bvh import read_bvh
+from mocap_exaggerate.pipeline import run
+from mocap_exaggerate.quality import motion_quality
+
+from .helpers import shared_clip_params
+
+#: Jerk p99 over the capture's, as issue 11 asks.
+JERK = {"subtle": 1.5, "cartoon": 2.0, "looney": 3.0}
+#: The ranges the presets' descriptions promise (README, "Presets"): the longest any arm or leg
+#: gets, and the longest the spine or neck gets, in rest lengths.
+LIMBS = {"subtle": 1.15, "cartoon": 1.5, "looney": 2.5}
+TORSO = {"subtle": 1.05, "cartoon": 1.05, "looney": 1.15}
+
+
+def _run(path, preset):
+    motion, _ = read_bvh(path, fps=120.0 if "amc2bvh" in path.name else None)
+    result = run(motion, load_preset(preset))
+    return motion, result, motion_quality(motion, result)
+
+
+@pytest.mark.parametrize("preset", ["subtle", "cartoon", "looney"])
+@pytest.mark.parametrize("path", shared_clip_params())
+def test_presets_read_as_animation_and_keep_their_word(path, preset):
+    motion, result, q = _run(path, preset)
+    where = f"{path.name} at {preset}"
+    assert q["jerk_ratio"] <= JERK[preset], (where, q["jerk_ratio"])
+    # No written joint spins round in a frame while the capture turns gently (it did 90-147 degrees).
+    assert q["flips"] == 0, where
+    # No pops: no joint moves in a frame more than twice the most it ever moves in the capture,
+    # rest-pose ends included. Toes, fingers and twist bones ride rigidly on a turning foot or
+    # forearm and get a little more (2.16x on the amc2bvh jump's toes at landing).
+    jumps = np.array(q["jumps"])
+    rigid = result.hierarchy.rigid if result.hierarchy is not None else np.zeros(len(jumps), bool)
+    assert jumps[~rigid].max() <= 2.0, (where, q["jump_joint"], q["jump_frame"], jumps[~rigid].max())
+    assert jumps.max() <= 2.25, (where, q["jump_joint"], q["jump_frame"])
+    limbs = [v["peak"] for k, v in q["stretch"].items() if k.endswith(("_arm", "_leg"))]
+    torso = [v["peak"] for k, v in q["stretch"].items() if k in ("spine", "neck")]
+    assert max(limbs) <= LIMBS[preset], (where, q["stretch"])
+    assert max(torso) <= TORSO[preset], (where, q["stretch"])
+    assert q["torso_within_limbs"], (where, q["stretch"])  # cartoon torsos stretch less than limbs
+
+
+@pytest.mark.parametrize("path", [p for p in shared_clip_params() if p.values[0] is None or
+                                  p.values[0].name in ("cmu_01_01_forward_jumps.bvh", "cmu_16_01_jump_amc2bvh.bvh",
+                                                       "assimp_boxing_toes.bvh")])
+def test_a_body_waiting_in_the_capture_does_not_float_about(path):
+    # The hop: the exaggerated body drifted 0.44 body heights a second while the actor stood
+    # still (0.05). What is left is the anticipation and settle of the moves either side.
+    _, _, q = _run(path, "looney")
+    assert q["drift"] is not None and q["drift"] <= 0.25, q["drift"]
