@@ -29,8 +29,10 @@ def forward_kinematics(
     joint's frames are contiguous in memory.
     """
     parents = np.asarray(parents)
-    rot = np.ascontiguousarray(np.swapaxes(local_rot, 0, 1), dtype=np.float64)
-    pos = np.ascontiguousarray(np.swapaxes(local_pos, 0, 1), dtype=np.float64)
+    # Always copies: for a single frame the swapped view is contiguous already, and writing into
+    # it changed the caller's motion (and the clip a one-frame slice was cut from).
+    rot = np.array(np.swapaxes(local_rot, 0, 1), dtype=np.float64, order="C")
+    pos = np.array(np.swapaxes(local_pos, 0, 1), dtype=np.float64, order="C")
     for j in range(1, len(parents)):
         p = parents[j]
         pos[j] = pos[p] + quat_rotate(rot[p], pos[j])

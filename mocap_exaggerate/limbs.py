@@ -21,7 +21,7 @@ import numpy as np
 
 from .skeleton import Skeleton
 
-__all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints"]
+__all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints", "limb_length"]
 
 LIMB_NAMES = ("left_arm", "right_arm", "left_leg", "right_leg", "spine", "neck")
 
@@ -189,3 +189,9 @@ def limb_joints(skeleton: Skeleton, limb: Limb, *, with_descendants: bool = True
     if with_descendants:
         joints.update(skeleton.descendants(limb.end).tolist())
     return np.array(sorted(joints), dtype=np.int64)
+
+
+def limb_length(skeleton: Skeleton, limb: Limb) -> float:
+    """A limb's full length: the rest lengths of its links, base to end."""
+    lengths = skeleton.link_lengths()
+    return float(sum(lengths[j] for j in limb.joints[1:]))

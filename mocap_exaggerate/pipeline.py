@@ -27,7 +27,7 @@ from .motion import Motion
 from .skeleton import Skeleton
 from .stages.contacts import ContactConfig, StretchKey, TargetSpec, constrain
 from .stages.correct import CorrectReport, accent_stretch, correct
-from .stages.extrapolate import extrapolate, gaussian_average, parse_duration
+from .stages.extrapolate import extrapolate, parse_duration
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping, strike_scale
@@ -251,12 +251,6 @@ def _springs(state: State, config) -> State:
         positions[state.first:], parents, frame_time, stiffness=config.stiffness,
         link_stiffness=config.link_stiffness, damping=config.damping, blend=config.blend, links=links,
     )
-    # The root keeps its path and the follow-through hangs off it: a body that overshoots as a whole
-    # would bob for a second after every landing while the capture stands still. Only the slow part
-    # of the root's lag is taken out; the springs still smooth its jolts.
-    root = int(np.flatnonzero(parents < 0)[0])
-    if links.members.size:
-        out[:, links.members] -= (out[:, root] - positions[:, root])[:, None]
     substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
     carried = stable_link_stiffness(frame_time, config.link_stiffness, links.degree, substeps)
     notes = state.notes
@@ -490,8 +484,8 @@ def torso_joints(skeleton: Skeleton, limbs: dict) -> np.ndarray:
         return np.zeros(0, dtype=np.int64)
     torso = set(skeleton.descendants(base).tolist()) | {base}
     for name, limb in limbs.items():
-        if name.endswith("_arm"):
-            torso -= set(limb_joints(skeleton, limb).tolist()) - {limb.base}
+        if name.endswith("_arm"):  # the arm below its shoulder ball: twist and share bones too
+            torso -= set(skeleton.descendants(limb.base).tolist()) - {limb.base}
     return np.array(sorted(torso), dtype=np.int64)
 
 

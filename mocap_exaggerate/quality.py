@@ -1,7 +1,7 @@
 """Does an output read as animation or as noise? Figures comparing a result with its capture.
 
 `motion_quality` measures what an animator sees (h = skeleton height; every frame counts,
-rest frames included, so a pop where the rest pose ends shows):
+kept rest frames included, so a pop where the rest pose ends shows):
 
 - ``jerk_ratio``: the 99th percentile over (frame, original joint) of |third difference of
   world position| on the output, over the same on the capture.
@@ -14,7 +14,8 @@ rest frames included, so a pop where the rest pose ends shows):
   its rest length: ``peak``, ``p95`` and ``above`` (share of frames over 1.5x); ``links`` is
   the largest ratio of any original link's straight length to its rest length;
   ``torso_within_limbs`` whether the spine's and neck's peaks are at most every arm's and
-  leg's peak.
+  leg's peak (within 1 % of rest length: a dragged leg that never stretches is not a limb
+  the torso must stay under to the last decimal).
 - ``drift`` (h/s): the mean speed of the root on frames where the captured root moves slower
   than 0.1 h/s for at least 0.5 s (None when there are none), and ``drift_captured``.
 
@@ -71,6 +72,8 @@ def _path(parents: np.ndarray, base: int, end: int) -> list[int]:
 
 def motion_quality(motion: Motion, result) -> dict:
     """The figures above for a `PipelineResult` of ``motion`` (the captured clip it was run on)."""
+    if result.rest_frames_dropped:  # compare with the frames that were kept
+        motion = motion.slice(slice(result.rest_frames, None))
     skeleton, dt = motion.skeleton, motion.frame_time
     h = skeleton.height()
     cap = motion.world_positions()
@@ -127,6 +130,6 @@ def motion_quality(motion: Motion, result) -> dict:
         "jump_ratio": float(ratios[worst]), "jump_joint": skeleton.names[worst], "jump_frame": worst_frame,
         "jumps": ratios.tolist(),
         "flips": int(flips.sum()), "stretch": stretch, "links": float(links.max()) if links.size else 1.0,
-        "torso_within_limbs": (max(torso_peaks) <= min(limb_peaks) + 1e-9) if torso_peaks and limb_peaks else None,
+        "torso_within_limbs": (max(torso_peaks) <= min(limb_peaks) + 0.01) if torso_peaks and limb_peaks else None,
         "drift": drift(out_all[:, root]), "drift_captured": drift(cap[:, 0]),
     }

@@ -307,3 +307,15 @@ def test_info_lists_contacts_and_the_manifest_records_them(tmp_path, sample_clip
     assert "constraints" in manifest["stages"]
     assert manifest["result"]["constraints"]["contacts"] == listed["contacts"]
     assert manifest["config"]["contacts"]["anchor"] == "exaggerated"
+
+
+def test_a_target_on_a_two_joint_chain_cut_once(sample_clip):
+    # Two original joints and one sub-joint between them look like a two-bone chain; the capture's
+    # bend plane only exists for three original joints.
+    motion, _ = read_bvh(sample_clip)
+    config = replace(load_preset("cartoon"), subjoints=replace(load_preset("cartoon").subjoints, per_link=2),
+                     target=(TargetSpec(joint="head", frame=60),))
+    result = run(motion, config)
+    head = result.original_index[motion.skeleton.index("head")]
+    assert np.allclose(result.world_positions[60, head], motion.world_positions()[60, motion.skeleton.index("head")],
+                       atol=1e-6 * motion.skeleton.height())

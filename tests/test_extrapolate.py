@@ -197,3 +197,15 @@ def test_smooth_and_max_speed_are_checked():
             ExtrapolateConfig(**bad)
     # smooth never takes the whole band: at most half of sigma is used.
     assert ExtrapolateConfig(sigma="0.04s", smooth="0.05s").smooth_frames(1 / 100) == pytest.approx(2.0)
+
+
+def test_time_on_another_axis_and_zero_weights_in_the_torso(sample_clip):
+    world = read_bvh(sample_clip)[0].world_positions()
+    common = dict(sigma=24.0, omega=4.0, smooth=6.0, ramp=24.0, max_speed=1.75, torso=(np.array([3, 4, 5]), 0.5))
+    weights = np.ones(world.shape[1])
+    weights[[4, 7]] = 0.0
+    along = extrapolate(world, weights=weights, **common)
+    across = extrapolate(world.swapaxes(0, 1), weights=weights, axis=1, **common)
+    assert np.allclose(across.swapaxes(0, 1), along)
+    # A weight of 0 keeps a joint as captured, in the torso too.
+    assert np.array_equal(along[:, [4, 7]], world[:, [4, 7]])

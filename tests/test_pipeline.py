@@ -1,5 +1,7 @@
 """The pipeline end to end on real clips: invariants, presets, configs, determinism."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -250,3 +252,32 @@ def test_no_nan_or_inf_at_the_limits_the_cli_accepts(
 
 
 CLIP_FOR_SWEEP = read_bvh(ROOT_SAMPLE / "cmu_09_01_run_daz.bvh")[0].slice(slice(0, 40))
+
+
+def test_running_a_one_frame_slice_leaves_the_clip_it_was_cut_from_alone(sample_clip):
+    motion = read_bvh(sample_clip)[0]
+    rotations, positions = motion.local_rotations.copy(), motion.local_positions.copy()
+    run(motion.slice(slice(10, 11)), load_preset("cartoon"))
+    assert np.array_equal(motion.local_rotations, rotations) and np.array_equal(motion.local_positions, positions)
+
+
+def test_input_fps_in_the_config_is_honoured_by_run():
+    motion, _ = read_bvh(shared("cmu_16_01_jump_amc2bvh.bvh"))
+    config = load_preset("cartoon")
+    retimed = run(motion, replace(config, input=replace(config.input, fps=120.0)))
+    read_at_120 = run(read_bvh(shared("cmu_16_01_jump_amc2bvh.bvh"), fps=120.0)[0], config)
+    assert retimed.motion.frame_time == pytest.approx(1 / 120)
+    assert np.array_equal(retimed.world_positions, read_at_120.world_positions)
+
+
+@pytest.mark.parametrize("preset", ["subtle", "cartoon", "looney"])
+def test_omega_one_with_the_presets_corrections_on_is_still_the_identity(sample_clip, preset):
+    # The held torso links and the accents must not shorten a link that is at its rest length.
+    motion = read_bvh(sample_clip)[0]
+    config = load_preset(preset)
+    config = replace(config, extrapolate=replace(config.extrapolate, omega=1.0),
+                     springs=replace(config.springs, enabled=False), subjoints=replace(config.subjoints, enabled=False),
+                     output=replace(config.output, skeleton="original"))
+    result = run(motion, config)
+    assert np.abs(result.world_positions - motion.world_positions()).max() < 1e-9 * motion.skeleton.height()
+    assert result.correct_report.frames_corrected == 0

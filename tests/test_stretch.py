@@ -323,3 +323,10 @@ def test_a_stretched_kick_lets_go_without_a_pop():
     # Measured before: 629 h/s^2 where the stretched kick let go, 143 without the stretch. (Before the
     # key the stretched foot meets the ball harder, by design: it travels 1.6x as far in the same time.)
     assert accel(result) <= 2.5 * accel(plain), (accel(result), accel(plain))
+
+
+def test_a_finder_asked_for_full_reach_on_a_walk_finds_nothing_and_does_not_crash():
+    motion, _ = read_bvh(shared("cmu_12_01_walk.bvh"))
+    config = AutoStretchConfig(enabled=True, min_reach=1.0)
+    assert find_strikes(motion.world_positions(), motion.skeleton, find_limbs(motion.skeleton), motion.frame_time,
+                        config) == []

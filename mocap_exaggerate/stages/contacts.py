@@ -386,19 +386,11 @@ def contact_weights(runs: np.ndarray, frames: int, ramp) -> np.ndarray:
     weight = np.zeros(frames)
     if not len(runs):
         return weight
-    if np.ndim(ramp) == 0:
-        mask = _mask_from_runs(runs, frames)
-        index = np.arange(frames, dtype=np.float64)
-        last = np.maximum.accumulate(np.where(mask, index, -np.inf))
-        following = np.minimum.accumulate(np.where(mask, index, np.inf)[::-1])[::-1]
-        distance = np.minimum(index - last, following - index)
-        if ramp <= 0:
-            return (distance == 0).astype(np.float64)
-        return smootherstep(1.0 - distance / (ramp + 1.0))
+    ramps = np.broadcast_to(np.asarray(ramp, dtype=np.float64), (len(runs), 2))
     index = np.arange(frames, dtype=np.float64)
-    for (first, last), (before, after) in zip(runs, np.asarray(ramp, dtype=np.float64)):
-        early = smootherstep(1.0 - (first - index) / (before + 1.0))
-        late = smootherstep(1.0 - (index - last) / (after + 1.0))
+    for (first, last), (before, after) in zip(runs, ramps):  # a loop over contacts, not frames
+        early = smootherstep(1.0 - (first - index) / (max(before, 0.0) + 1.0))
+        late = smootherstep(1.0 - (index - last) / (max(after, 0.0) + 1.0))
         weight = np.maximum(weight, np.where(index < first, early, np.where(index > last, late, 1.0)))
     return weight
 
@@ -736,7 +728,9 @@ def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, 
         return
     points = out[frames][:, chain]
     if len(chain) == 3:
-        bend = captured[frames][:, list(effector.chain)]
+        # The capture's bend plane, when the three points are three original joints (not a
+        # two-joint chain cut once).
+        bend = captured[frames][:, list(effector.chain)] if len(effector.chain) == 3 else None
         middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[frames], bend)
         new = np.stack([points[:, 0], middle, goal[frames]], axis=1)
     else:

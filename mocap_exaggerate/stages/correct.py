@@ -211,9 +211,14 @@ def correct(
     width = _SOFT * rest_lengths[1:]
     if smooth > 0:
         excess = soft_excess(length, limit, width)
+        # Held links round their corner only above their rest length: one at rest is never shortened
+        # (omega 1 stays the identity), and the rounding still never takes them past their limit.
+        corner = np.minimum(width, np.maximum(limit - rest_lengths[1:], 0.0))
+        excess[:, hard_links] = soft_excess(length[:, hard_links], limit[:, hard_links], corner[:, hard_links])
     else:
         excess = x
-    held = np.flatnonzero((excess[:, hard_links] > 0).any(axis=1)) if hard_links.any() else np.zeros(0, int)
+    held = (excess[:, hard_links] > 1e-9 * rest_lengths[1:][hard_links]).any(axis=1) if hard_links.any() else []
+    held = np.flatnonzero(held)
     if not len(active) and not len(held):
         return out, CorrectReport(0, 0, float(errors.max(initial=0.0)), float(errors.max(initial=0.0)), 0)
 

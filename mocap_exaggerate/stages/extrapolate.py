@@ -32,7 +32,7 @@ Stillness: where a joint stands still in the capture its average still
 moves when a move comes near, and an exaggerated hip would float about
 while the actor waits. With ``still`` set, a joint's exaggeration is scaled
 by how much it moves: none below ``still`` speed (body heights per
-second), all from 3x that, spread over sigma / 3 either side so a move's
+second), all from 3x that, spread over sigma either side so a move's
 anticipation and settle survive.
 """
 
@@ -255,25 +255,25 @@ def extrapolate(
     world_pos = np.asarray(world_pos, dtype=np.float64)
     if world_pos.ndim != 3 or world_pos.shape[-1] != 3:
         raise ValueError(f"positions must be (F, J, 3), got {world_pos.shape}")
-    gain = np.full(world_pos.shape[1], omega - 1.0)
+    moved = np.moveaxis(world_pos, axis, 0)
+    gain = np.full(moved.shape[1], omega - 1.0)
     if weights is not None:
         weights = np.asarray(weights, dtype=np.float64)
         if weights.shape != gain.shape:
-            raise ValueError(f"weights must be ({world_pos.shape[1]},), got {weights.shape}")
+            raise ValueError(f"weights must be ({moved.shape[1]},), got {weights.shape}")
         gain = gain * weights
     if not np.any(gain):
         return world_pos.copy()
-    moved = np.moveaxis(world_pos, axis, 0)
     smoothed = gaussian_average(moved, smooth)
     deviation = smoothed - gaussian_average(moved, sigma)
+    if torso is not None and len(torso[0]):
+        joints, share = torso  # ride with the root, swing a share of their own
+        deviation[:, joints] = deviation[:, :1] + share * (deviation[:, joints] - deviation[:, :1])
     deviation *= gain[:, None]
     if still > 0 and len(moved) > 1:
         speed = np.linalg.norm(np.gradient(smoothed, axis=0), axis=-1)  # (F, J) per frame
         moving = smootherstep((speed - still) / (2.0 * still))
         deviation *= spread_max(moving, max(int(round(sigma)), 1))[..., None]
-    if torso is not None and len(torso[0]):
-        joints, share = torso
-        deviation[:, joints] = deviation[:, :1] + share * (deviation[:, joints] - deviation[:, :1])
     if ramp > 0:
         deviation *= end_ramp(len(moved), ramp)[:, None, None]
     if max_speed > 0 and len(moved) > 2:
@@ -293,20 +293,25 @@ def _limit_speed(deviation: np.ndarray, budget: np.ndarray, radius: int) -> np.n
     is spread over ``radius`` frames either side (a running minimum, then a
     Gaussian truncated there, so never above what any frame needs) and the
     deviation scaled by it; repeated, since scaling by a changing gain adds
-    a step of its own.
+    a step of its own. A joint still over budget after the passes has its
+    whole deviation scaled down, so the budget always holds.
     """
     out = deviation
     for _ in range(_SPEED_PASSES):
         step = np.linalg.norm(np.diff(out, axis=0), axis=-1)  # (F-1, J)
         over = step > budget * (1.0 - 1e-9)
         if not over.any():
-            break
+            return out
         need = np.ones(step.shape[0] + 1, dtype=np.float64)[:, None].repeat(step.shape[1], axis=1)
         share = np.where(over, budget / np.maximum(step, 1e-300), 1.0) * 0.98  # a step joins two frames: both
         need[:-1] = np.minimum(need[:-1], share)
         need[1:] = np.minimum(need[1:], share)
         out = out * (1.0 - spread_max(1.0 - need, radius))[..., None]
-    return out
+    # Still over after the passes (a gain changing fast where the deviation is large: a sigma of
+    # a few frames): scale those joints' whole deviation down, which scales every step alike.
+    step = np.linalg.norm(np.diff(out, axis=0), axis=-1).max(axis=0)
+    scale = np.where(step > budget, budget / np.maximum(step, 1e-300), 1.0)
+    return out * scale[:, None]
 
 
 def spread_max(values: np.ndarray, radius: int) -> np.ndarray:

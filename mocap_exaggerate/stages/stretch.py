@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import ConfigError, check_number
+from ..limbs import limb_length
 from ..rotations import quat_between, quat_rotate
 from .extrapolate import parse_duration, parse_frame
 
@@ -505,13 +506,12 @@ def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float
     if frames < 8:
         return []
     specs = []
-    lengths = skeleton.link_lengths()
     window = max(3, int(round(config.window / frame_time)))
     release = int(round(parse_duration(DEFAULT_RELEASE, frame_time)))
     for name, limb in limbs.items():
         if not name.endswith(("_arm", "_leg")):
             continue
-        full = float(sum(lengths[j] for j in limb.joints[1:]))
+        full = limb_length(skeleton, limb)
         if full <= 0:
             continue
         reach = np.linalg.norm(world_pos[:, limb.end] - world_pos[:, limb.base], axis=-1) / full
@@ -524,6 +524,8 @@ def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float
         padded = np.pad(reach, near, mode="edge")
         highest = np.lib.stride_tricks.sliding_window_view(padded, 2 * near + 1).max(axis=-1)
         peaks = np.flatnonzero((reach >= highest) & (reach >= config.min_reach))
+        if not len(peaks):
+            continue
         peaks = peaks[np.concatenate([[True], np.diff(peaks) > near])]  # a flat top counts once
         candidates = []
         for peak in peaks:
@@ -535,8 +537,7 @@ def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float
             swings = rise >= 0.5 * config.min_extension and speed[start : peak + 1].max() >= config.min_speed
             if not (unfolds or swings):
                 continue
-            while start < peak and rate[start] < 0.25 * fastest:  # where the extension gets going
-                start += 1
+            start += int(np.argmax(rate[start : peak + 1] >= 0.25 * fastest))  # where the extension gets going
             start = max(start - 1, lo)
             if peak - start >= 3:
                 candidates.append((fastest, int(start), int(peak)))
@@ -562,7 +563,7 @@ def strike_scale(spec: StretchSpec, world_pos: np.ndarray, skeleton, limbs: dict
     ``scale * full / reach``, and never below 1 (a strike does not squash).
     """
     limb = limbs[spec.limb]
-    full = float(sum(skeleton.link_lengths()[j] for j in limb.joints[1:]))
+    full = limb_length(skeleton, limb)
     first, last = spec.frames(frame_time, world_pos.shape[0])
     key = first if spec.pivot == "end" else last
     reach = float(np.linalg.norm(world_pos[key, limb.end] - world_pos[key, limb.base]))
