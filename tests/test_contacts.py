@@ -319,3 +319,12 @@ def test_a_target_on_a_two_joint_chain_cut_once(sample_clip):
     head = result.original_index[motion.skeleton.index("head")]
     assert np.allclose(result.world_positions[60, head], motion.world_positions()[60, motion.skeleton.index("head")],
                        atol=1e-6 * motion.skeleton.height())
+
+
+def test_the_eases_of_two_close_contacts_meet_without_a_corner():
+    weights = contact_weights(np.array([[10, 20], [34, 50]]), 70, np.array([[5.0, 10.0], [10.0, 5.0]]))
+    assert np.all(weights[10:21] == 1.0) and np.all(weights[34:51] == 1.0) and weights[0] == 0.0
+    between = weights[20:35]
+    assert between.min() > 0.0  # the two eases overlap...
+    # ...and the foot's weight turns smoothly where they meet (a max of the two had a corner there).
+    assert np.abs(np.diff(between, 2)).max() < 0.12

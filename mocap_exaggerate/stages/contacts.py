@@ -383,16 +383,18 @@ def contact_weights(runs: np.ndarray, frames: int, ramp) -> np.ndarray:
 
     ``ramp`` is one number for every run, or ``(n, 2)`` frames before and after each run.
     """
-    weight = np.zeros(frames)
+    free = np.ones(frames)
     if not len(runs):
-        return weight
+        return 1.0 - free
     ramps = np.broadcast_to(np.asarray(ramp, dtype=np.float64), (len(runs), 2))
     index = np.arange(frames, dtype=np.float64)
     for (first, last), (before, after) in zip(runs, ramps):  # a loop over contacts, not frames
         early = smootherstep(1.0 - (first - index) / (max(before, 0.0) + 1.0))
         late = smootherstep(1.0 - (index - last) / (max(after, 0.0) + 1.0))
-        weight = np.maximum(weight, np.where(index < first, early, np.where(index > last, late, 1.0)))
-    return weight
+        # Combined as 1 - prod(1 - w), not max: where one run's ease out meets the next one's ease in,
+        # a max has a corner (a foot between two close steps popped at 3x the free run's acceleration).
+        free *= 1.0 - np.where(index < first, early, np.where(index > last, late, 1.0))
+    return 1.0 - free
 
 
 def run_ramps(runs: np.ndarray, gap: np.ndarray, speed: float, ramp: float, longest: float) -> np.ndarray:
