@@ -386,14 +386,15 @@ def contact_weights(runs: np.ndarray, frames: int, ramp) -> np.ndarray:
     free = np.ones(frames)
     if not len(runs):
         return 1.0 - free
-    ramps = np.broadcast_to(np.asarray(ramp, dtype=np.float64), (len(runs), 2))
-    index = np.arange(frames, dtype=np.float64)
+    ramps = np.maximum(np.broadcast_to(np.asarray(ramp, dtype=np.float64), (len(runs), 2)), 0.0)
     for (first, last), (before, after) in zip(runs, ramps):  # a loop over contacts, not frames
-        early = smootherstep(1.0 - (first - index) / (max(before, 0.0) + 1.0))
-        late = smootherstep(1.0 - (index - last) / (max(after, 0.0) + 1.0))
+        lo, hi = max(0, int(first - before - 1)), min(frames, int(np.ceil(last + after + 2)))
+        index = np.arange(lo, hi, dtype=np.float64)
+        early = smootherstep(1.0 - (first - index) / (before + 1.0))
+        late = smootherstep(1.0 - (index - last) / (after + 1.0))
         # Combined as 1 - prod(1 - w), not max: where one run's ease out meets the next one's ease in,
         # a max has a corner (a foot between two close steps popped at 3x the free run's acceleration).
-        free *= 1.0 - np.where(index < first, early, np.where(index > last, late, 1.0))
+        free[lo:hi] *= 1.0 - np.where(index < first, early, np.where(index > last, late, 1.0))
     return 1.0 - free
 
 
