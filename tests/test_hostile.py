@@ -202,6 +202,20 @@ CASES = {
     "contact speed negative": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
                                                 _text(t / "c.toml", "[contacts]\nspeed = -1\n")], 2, "speed"),
     "unknown anchor": lambda t, c, o: (["exaggerate", c, "-o", o, "--anchor", "moon"], 2, "--anchor"),
+    "speed limit below 1": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
+                                             _text(t / "c.toml", "[extrapolate]\nmax_speed = 0.5\n")], 2, "max_speed"),
+    "negative smoothing": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
+                                            _text(t / "c.toml", '[extrapolate]\nsmooth = "-1s"\n')], 2, "smooth"),
+    "smoothing a day long": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
+                                              _text(t / "c.toml", '[correct]\nsmooth = "86400s"\n')], 2, "smooth"),
+    "torso over 1": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
+                                      _text(t / "c.toml", "[correct]\ntorso = 2\n")], 2, "torso"),
+    "accent speed not a number": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
+                                                   _text(t / "c.toml", '[correct]\naccent_speed = "fast"\n')], 2, "accent_speed"),
+    "strike rate NaN": lambda t, c, o: (["exaggerate", c, "-o", o, "--auto-stretch", "--config",
+                                         _text(t / "c.toml", "[auto_stretch]\nmin_rate = nan\n")], 2, "min_rate"),
+    "old strike key": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
+                                        _text(t / "c.toml", "[auto_stretch]\nspeed_factor = 3\n")], 2, "speed_factor"),
 }
 
 
