@@ -27,7 +27,7 @@ from .motion import Motion
 from .skeleton import Skeleton
 from .stages.contacts import ContactConfig, StretchKey, TargetSpec, constrain
 from .stages.correct import CorrectReport, accent_stretch, correct
-from .stages.extrapolate import extrapolate, parse_duration
+from .stages.extrapolate import extrapolate, parse_duration, smootherstep
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping, strike_scale
@@ -245,11 +245,19 @@ def _springs(state: State, config) -> State:
             hanging[limb_joints(skeleton, limb)] = True
         hanging[[limb.base for limb in limbs]] = False
         active &= hanging[hierarchy.link_child]
+        # The follow-through grows along a limb's first link, from none at the shoulder or hip to all
+        # of it at the elbow or knee: a sub-joint next to a fixed root swinging fully kinked the limb there.
+        blend = np.full(len(parents), float(config.blend))
+        for limb in limbs:
+            first = hierarchy.link_child == limb.joints[1]
+            blend[first] *= smootherstep(hierarchy.fraction[first])
+    else:
+        blend = config.blend
     links = spring_links(parents, active)
     out = positions.copy()
     out[state.first:] = simulate_springs(
         positions[state.first:], parents, frame_time, stiffness=config.stiffness,
-        link_stiffness=config.link_stiffness, damping=config.damping, blend=config.blend, links=links,
+        link_stiffness=config.link_stiffness, damping=config.damping, blend=blend, links=links,
     )
     substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
     carried = stable_link_stiffness(frame_time, config.link_stiffness, links.degree, substeps)

@@ -123,3 +123,13 @@ def test_springs_change_a_real_clip_but_not_its_rest_frames(sample_clip):
     result = run(motion, load_preset("looney"))
     assert result.substeps >= 1
     assert "springs" in result.timings
+
+
+def test_blend_per_joint():
+    positions = np.cumsum(np.random.default_rng(5).normal(size=(60, 5, 3)), axis=0)
+    full = simulate_springs(positions, CHAIN, 1 / 30, blend=0.6, **SETTINGS)
+    ramp = simulate_springs(positions, CHAIN, 1 / 30, blend=np.array([0.0, 0.0, 0.3, 0.6, 0.6]), **SETTINGS)
+    assert np.array_equal(ramp[:, :2], positions[:, :2])  # no share: on the path
+    assert np.allclose(ramp[:, 3:], full[:, 3:])  # the same share: the same result
+    half = (ramp[:, 2] - positions[:, 2]) / np.where(full[:, 2] == positions[:, 2], 1.0, full[:, 2] - positions[:, 2])
+    assert np.allclose(half[1:], 0.5)  # half the share, half the lag

@@ -253,7 +253,7 @@ def simulate_springs(
     stiffness: float,
     link_stiffness: float,
     damping: float,
-    blend: float,
+    blend: float | np.ndarray,
     active: np.ndarray | None = None,
     links: SpringLinks | None = None,
     compiled: bool = True,
@@ -265,7 +265,8 @@ def simulate_springs(
     positions : (F, J, 3) float64 follower (sub-joint) positions
     parents : (J,) int, the hierarchy whose links carry link springs
     frame_time : seconds per frame
-    stiffness, link_stiffness, damping, blend : see `SpringConfig`
+    stiffness, link_stiffness, damping, blend : see `SpringConfig`; ``blend`` may also be (J,),
+        per joint (a limb's follow-through growing from its root)
     active : (J,) bool, joints that get a suspended particle (others copied)
     links : the topology from `spring_links` (computed from parents and active when None)
     compiled : False runs the plain per-particle Python loop (the test oracle) instead of the NumPy one
@@ -278,7 +279,8 @@ def simulate_springs(
     if positions.ndim != 3 or positions.shape[-1] != 3:
         raise ValueError(f"positions must be (F, J, 3), got {positions.shape}")
     out = positions.copy()
-    if blend == 0 or positions.shape[0] < 2:
+    blend = np.asarray(blend, dtype=np.float64)
+    if not np.any(blend) or positions.shape[0] < 2:
         return out
     members, link_a, link_b, degree = links or spring_links(parents, active)
     substeps = substeps_for(frame_time, stiffness, link_stiffness, degree)
@@ -287,5 +289,6 @@ def simulate_springs(
     kernel = _integrate_vectorised if compiled else _integrate
     suspended = kernel(follow, link_a, link_b, float(frame_time), substeps, float(stiffness),
                        float(link_stiffness), float(damping))
-    out[:, members] = (1.0 - blend) * follow + blend * suspended
+    share = blend[members][:, None] if blend.ndim else blend
+    out[:, members] = (1.0 - share) * follow + share * suspended
     return out
