@@ -141,13 +141,18 @@ def _extrapolate(state: State, config) -> State:
     positions = state.positions.copy()
     frame_time = state.motion.frame_time
     sigma = config.sigma_frames(frame_time, len(state.positions) - first)
+    notes = state.notes
+    asked = parse_duration(config.smooth, frame_time, what="extrapolate.smooth")
+    if asked > 0.5 * sigma:
+        notes += (f"extrapolate.smooth {config.smooth!r} is more than half of sigma {config.sigma!r}; used "
+                  f"{0.5 * sigma * frame_time:.3g} s (the band between them is what gets exaggerated)",)
     positions[first:] = extrapolate(
         state.positions[first:], sigma=sigma, omega=config.omega, weights=weights,
         smooth=config.smooth_frames(frame_time), ramp=sigma, max_speed=config.max_speed,
         still=config.still * skeleton.height() * frame_time,
         torso=(torso_joints(skeleton, state.limbs), config.torso) if config.torso != 1 else None,
     )
-    return replace(state, positions=positions)
+    return replace(state, positions=positions, notes=notes)
 
 
 def _correct(state: State, config) -> State:
@@ -473,8 +478,12 @@ def _specs_for_paths(paths: dict, specs: tuple[StretchSpec, ...]) -> tuple[Stret
 
 
 def max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.ndarray) -> float:
-    """Largest ratio of current to rest length over links longer than 1e-9 of the longest."""
-    long_links = lengths > 1e-9 * max(lengths.max(), 1e-12)
+    """Largest ratio of current to rest length over links longer than 1e-3 of the longest.
+
+    Shorter ones are placeholders (Reallusion's pelvis sits 0.7 micrometres from its hip):
+    moved a centimetre they read as a 37,000x stretch.
+    """
+    long_links = lengths > 1e-3 * max(lengths.max(), 1e-12)
     long_links[0] = False
     if not long_links.any():
         return 1.0

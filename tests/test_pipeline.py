@@ -281,3 +281,17 @@ def test_omega_one_with_the_presets_corrections_on_is_still_the_identity(sample_
     result = run(motion, config)
     assert np.abs(result.world_positions - motion.world_positions()).max() < 1e-9 * motion.skeleton.height()
     assert result.correct_report.frames_corrected == 0
+
+
+def test_a_smoothing_wider_than_the_band_is_said_and_the_link_figure_skips_placeholders(sample_clip):
+    motion = read_bvh(sample_clip)[0]
+    config = load_preset("cartoon")
+    result = run(motion, replace(config, extrapolate=replace(config.extrapolate, sigma="0.02s", smooth="0.2s")))
+    assert any("extrapolate.smooth" in note and "half of sigma" in note for note in result.notes)
+    # A link a micrometre long (Reallusion's pelvis) moved a centimetre is not a 10,000x stretch.
+    from mocap_exaggerate.pipeline import max_link_stretch
+
+    parents = np.array([-1, 0, 1])
+    lengths = np.array([0.0, 7e-5, 40.0])
+    positions = np.array([[[0.0, 0, 0], [0.0, 1.0, 0], [0.0, 41.0, 0]]])
+    assert max_link_stretch(positions, parents, lengths) == pytest.approx(1.0)
