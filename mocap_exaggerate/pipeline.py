@@ -26,7 +26,7 @@ from .limbs import LIMB_NAMES, find_limbs, limb_joints
 from .motion import Motion
 from .skeleton import Skeleton
 from .stages.contacts import ContactConfig, StretchKey, TargetSpec, constrain
-from .stages.correct import CorrectReport, accent_stretch, correct
+from .stages.correct import CorrectReport, accent_stretch, correct, keep_bends
 from .stages.extrapolate import extrapolate, parse_duration, smootherstep
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
@@ -173,8 +173,15 @@ def _correct(state: State, config) -> State:
                 hard[list(state.limbs[name].joints[1:])] = True
         max_stretch = np.broadcast_to(max_stretch, (len(state.positions) - first, skeleton.num_joints)).copy()
         max_stretch[:, hard] = 1.0 + (max_stretch[:, hard] - 1.0) * config.torso
+    hinges = []
+    for name, limb in state.limbs.items():
+        if name.endswith(("_arm", "_leg")) and len(limb.joints) >= 3:
+            toes = [int(c) for c in skeleton.children(limb.joints[2])] if name.endswith("_leg") else []
+            reach = [skeleton.link_lengths()[c] for c in toes]
+            hinges.append(tuple(limb.joints[:3]) + ((toes[int(np.argmax(reach))],) if toes and max(reach) > 0 else ()))
+    bent = keep_bends(state.positions[first:], state.captured_pos[first:], hinges) if hinges else state.positions[first:]
     body, report = correct(
-        state.positions[first:], skeleton.parents, skeleton.link_lengths(), threshold=config.threshold,
+        bent, skeleton.parents, skeleton.link_lengths(), threshold=config.threshold,
         delta=config.delta, max_stretch=max_stretch, max_iter=config.max_iter, smooth=smooth, hard=hard,
     )
     positions = state.positions.copy()

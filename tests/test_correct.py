@@ -4,7 +4,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mocap_exaggerate.io.bvh import read_bvh
-from mocap_exaggerate.stages.correct import CorrectConfig, accent_stretch, correct, stretch_error
+from mocap_exaggerate.stages.correct import CorrectConfig, accent_stretch, correct, keep_bends, stretch_error
 from mocap_exaggerate.stages.extrapolate import extrapolate, spread_max
 
 from .helpers import shared
@@ -200,3 +200,15 @@ def test_spread_max_is_never_below_its_input_and_zero_two_radii_away(values, rad
     frames = np.arange(len(values))
     far = np.all(np.abs(frames[:, None] - nonzero[None, :]) > 2 * radius, axis=1) if len(nonzero) else np.ones(len(values), bool)
     assert np.all(spread[far] == 0.0)
+
+
+def test_a_knee_pushed_behind_the_leg_comes_back_and_a_bent_one_is_left_alone():
+    # Hip at the top, ankle below; the captured knee bends forward (+z) a little.
+    captured = np.array([[[0.0, 1.0, 0.0], [0.0, 0.5, 0.05], [0.0, 0.0, 0.0], [0.0, 0.0, 0.15]]] * 3)
+    exaggerated = captured.copy()
+    exaggerated[0, 1, 2] = -0.08  # hyperextended: behind the hip-ankle line
+    exaggerated[1, 1, 2] = 0.3  # bent further forward: fine
+    out = keep_bends(exaggerated, captured, [(0, 1, 2, 3)])
+    assert out[0, 1, 2] > 0.0  # in front of the line again
+    assert np.array_equal(out[1], exaggerated[1]) and np.array_equal(out[2], exaggerated[2])
+    assert np.array_equal(out[:, [0, 2, 3]], exaggerated[:, [0, 2, 3]])  # only the knee moves

@@ -43,7 +43,7 @@ import numpy as np
 from ..errors import ConfigError, check_flag, check_number
 from .extrapolate import parse_duration, smootherstep, spread_max
 
-__all__ = ["CorrectConfig", "CorrectReport", "accent_stretch", "correct", "stretch_error"]
+__all__ = ["CorrectConfig", "CorrectReport", "accent_stretch", "correct", "keep_bends", "stretch_error"]
 
 #: A threshold of 0 is reached only in the limit for delta < 1; stop this close to it.
 _TOLERANCE = 1e-9
@@ -105,6 +105,56 @@ class CorrectReport:
     max_error_before: float
     max_error_after: float
     unconverged_frames: int
+
+
+def keep_bends(positions: np.ndarray, captured: np.ndarray, hinges, *, margin: float = 0.02) -> np.ndarray:
+    """Knees and elbows bent the way the capture bends them, never backwards.
+
+    positions, captured : (F, J, 3) exaggerated and captured world positions
+    hinges : (base, middle, end) joint triples (hip, knee, ankle; shoulder, elbow, wrist), or
+        (hip, knee, ankle, toe): the toes tell which way a knee bends when the leg is straight
+
+    Exaggerating a nearly straight leg can carry the knee across the hip-ankle
+    line: a knee bending backwards on a planted leg. The captured knee's side
+    of that line, seen across the exaggerated line, is the side it must stay
+    on: its offset along that side is kept at least about ``margin`` of the
+    limb's length (a C1 soft clamp, unchanged above twice that), with the
+    correction faded out where the capture itself is nearly straight and
+    says little about its side. Only the middle joint moves; the length
+    correction that follows mends the two links.
+    """
+    out = np.array(positions, dtype=np.float64)
+    for hinge in hinges:
+        base, middle, end = hinge[:3]
+        line = out[:, end] - out[:, base]
+        reach = np.linalg.norm(line, axis=-1, keepdims=True)
+        along = line / np.maximum(reach, 1e-300)
+        bent = captured[:, middle] - captured[:, base]
+        cap_line = captured[:, end] - captured[:, base]
+        cap_line = cap_line / np.maximum(np.linalg.norm(cap_line, axis=-1, keepdims=True), 1e-300)
+        side = bent - np.sum(bent * cap_line, axis=-1, keepdims=True) * cap_line
+        length = np.linalg.norm(captured[:, middle] - captured[:, base], axis=-1) + \
+            np.linalg.norm(captured[:, end] - captured[:, middle], axis=-1)
+        if len(hinge) > 3:  # a foot: knees bend toward the toes, which says so even on a straight leg
+            toes = captured[:, hinge[3]] - captured[:, end]
+            toes = toes - np.sum(toes * cap_line, axis=-1, keepdims=True) * cap_line
+            toes = toes / np.maximum(np.linalg.norm(toes, axis=-1, keepdims=True), 1e-300)
+            side = side + 0.1 * length[:, None] * toes
+        side = side - np.sum(side * along, axis=-1, keepdims=True) * along
+        size = np.linalg.norm(side, axis=-1)
+        side = side / np.maximum(size, 1e-300)[:, None]
+        offset = out[:, middle] - out[:, base]
+        offset = offset - np.sum(offset * along, axis=-1, keepdims=True) * along
+        s = np.sum(offset * side, axis=-1)
+        floor = margin * length
+        # A soft clamp: unchanged from 2 floor up, never below 0 (behind the line).
+        low = s < 2.0 * floor
+        lifted = s.copy()
+        knee = 2.0 * floor[low]  # s -> 2f - 2f (1 - exp((s - 2f) / 2f)): slope 1 at 2f, 0 as s -> -inf
+        lifted[low] = knee - knee * (1.0 - np.exp((s[low] - knee) / np.maximum(knee, 1e-300)))
+        trust = smootherstep(size / np.maximum(0.05 * length, 1e-300))
+        out[:, middle] += ((lifted - s) * trust)[:, None] * side
+    return out
 
 
 def accent_stretch(captured: np.ndarray, frame_time: float, height: float, *, max_stretch: float,
