@@ -173,12 +173,7 @@ def _correct(state: State, config) -> State:
                 hard[list(state.limbs[name].joints[1:])] = True
         max_stretch = np.broadcast_to(max_stretch, (len(state.positions) - first, skeleton.num_joints)).copy()
         max_stretch[:, hard] = 1.0 + (max_stretch[:, hard] - 1.0) * config.torso
-    hinges = []
-    for name, limb in state.limbs.items():
-        if name.endswith(("_arm", "_leg")) and len(limb.joints) >= 3:
-            toes = [int(c) for c in skeleton.children(limb.joints[2])] if name.endswith("_leg") else []
-            reach = [skeleton.link_lengths()[c] for c in toes]
-            hinges.append(tuple(limb.joints[:3]) + ((toes[int(np.argmax(reach))],) if toes and max(reach) > 0 else ()))
+    hinges = limb_hinges(skeleton, state.limbs)
     bent = keep_bends(state.positions[first:], state.captured_pos[first:], hinges) if hinges else state.positions[first:]
     body, report = correct(
         bent, skeleton.parents, skeleton.link_lengths(), threshold=config.threshold,
@@ -271,6 +266,23 @@ def _springs(state: State, config) -> State:
         positions[state.first:], parents, frame_time, stiffness=config.stiffness,
         link_stiffness=config.link_stiffness, damping=config.damping, blend=blend, links=links,
     )
+    # The knees' and elbows' lag may carry them behind the line again: bend them back, the
+    # sub-joints on the two links either side moving with them in proportion.
+    hinges = limb_hinges(skeleton, state.limbs)
+    if hinges:
+        original = hierarchy.original
+        moving = out[state.first:]
+        joints = moving[:, original]
+        bent = keep_bends(joints, state.captured_pos[state.first:], hinges)
+        for hinge in hinges:
+            base, middle, end = hinge[:3]
+            shift = bent[:, middle] - joints[:, middle]
+            if not shift.any():
+                continue
+            upper = np.flatnonzero(hierarchy.link_child == middle)  # the middle joint and the sub-joints above it
+            lower = np.flatnonzero((hierarchy.link_child == end) & ~hierarchy.is_original)
+            moving[:, upper] += hierarchy.fraction[upper][None, :, None] * shift[:, None]
+            moving[:, lower] += (1.0 - hierarchy.fraction[lower])[None, :, None] * shift[:, None]
     substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
     carried = stable_link_stiffness(frame_time, config.link_stiffness, links.degree, substeps)
     notes = state.notes
@@ -496,6 +508,17 @@ def max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.nda
         return 1.0
     current = np.linalg.norm(positions[:, long_links] - positions[:, parents[long_links]], axis=-1)
     return float((current / lengths[long_links]).max())
+
+
+def limb_hinges(skeleton: Skeleton, limbs: dict) -> list[tuple[int, ...]]:
+    """(base, middle, end) of every arm and leg, and for a leg its longest toe after them."""
+    hinges = []
+    for name, limb in limbs.items():
+        if name.endswith(("_arm", "_leg")) and len(limb.joints) >= 3:
+            toes = [int(c) for c in skeleton.children(limb.joints[2])] if name.endswith("_leg") else []
+            reach = [skeleton.link_lengths()[c] for c in toes]
+            hinges.append(tuple(limb.joints[:3]) + ((toes[int(np.argmax(reach))],) if toes and max(reach) > 0 else ()))
+    return hinges
 
 
 def torso_joints(skeleton: Skeleton, limbs: dict) -> np.ndarray:
