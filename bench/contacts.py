@@ -30,22 +30,18 @@ Not a test: run it by hand (``python bench/contacts.py``) and quote the figures.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
 import time
 from pathlib import Path
 
 import numpy as np
 
+from common import FPS, cell, run_bench
+
 from mocap_exaggerate import load_bvh, load_preset
 from mocap_exaggerate.limbs import find_limbs
 from mocap_exaggerate.pipeline import run
 
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared" / "data" / "bvh"
-#: Clips whose header states the wrong frame rate (amc2bvh writes 30 fps for 120 Hz captures).
-FPS = {"cmu_16_01_jump_amc2bvh.bvh": 120.0}
 LEGS = ("left_leg", "right_leg")
 
 
@@ -148,8 +144,6 @@ def clip_figures(path: Path, preset: str) -> dict:
     return figures
 
 
-def cell(value, fmt: str = ".3f") -> str:
-    return "-" if value is None else format(value, fmt)
 
 
 def table(preset: str, rows: list[dict]) -> None:
@@ -159,8 +153,8 @@ def table(preset: str, rows: list[dict]) -> None:
     print("|---" * 14 + "|")
     for r in rows:
         off, on = r["runs"]["off"], r["runs"].get("on", {})
-        print(f"| {r['clip']} | {r['frames']} | {cell(r['skating_captured'])} | {cell(off['skating'])} "
-              f"| {cell(on.get('skating'))} | {off['deepest']:.4f} | {off['frames_below']} "
+        print(f"| {r['clip']} | {r['frames']} | {cell(r['skating_captured'], '.3f')} | {cell(off['skating'], '.3f')} "
+              f"| {cell(on.get('skating'), '.3f')} | {off['deepest']:.4f} | {off['frames_below']} "
               f"| {cell(on.get('deepest'), '.4f')} | {cell(on.get('frames_below'), 'd')} "
               f"| {cell(r.get('exaggeration_kept'), '.1%')} | {off['accel']:.0f} | {cell(on.get('accel'), '.0f')} "
               f"| {cell(r.get('accel_ratio'), '.2f')} | {off['seconds']:.2f} / {cell(on.get('seconds'), '.2f')} |")
@@ -174,25 +168,7 @@ def table(preset: str, rows: list[dict]) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--presets", default="cartoon,looney")
-    parser.add_argument("--clips", default="", help="comma-separated substrings of clip names")
-    parser.add_argument("--data", type=Path, default=SHARED)
-    parser.add_argument("--json", type=Path, default=None, help="also write every figure here")
-    args = parser.parse_args()
-    wanted = [s for s in args.clips.split(",") if s]
-    clips = [p for p in sorted(args.data.glob("*.bvh")) if not wanted or any(s in p.name for s in wanted)]
-    if not clips:
-        raise SystemExit(f"no clips in {args.data} match {args.clips!r}")
-    everything = {}
-    for preset in [p for p in args.presets.split(",") if p]:
-        config = load_preset(preset)
-        if hasattr(config, "contacts") and not config.contacts.enabled:
-            print(f"note: preset {preset} has contacts switched off; its 'on' run is the preset as is")
-        everything[preset] = [clip_figures(path, preset) for path in clips]
-        table(preset, everything[preset])
-    if args.json:
-        args.json.write_text(json.dumps(everything, indent=1) + "\n")
+    run_bench(__doc__.splitlines()[0], clip_figures, table, presets="cartoon,looney")
 
 
 if __name__ == "__main__":

@@ -14,23 +14,16 @@ Not a test: run it by hand (``python bench/quality.py``) and quote the figures.
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
-import json
-import sys
 import time
 from pathlib import Path
 
-import numpy as np
+
+from common import FPS, cell, run_bench
 
 from mocap_exaggerate import load_bvh, load_preset
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.quality import motion_quality
 
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared" / "data" / "bvh"
-#: Clips whose header states the wrong frame rate (amc2bvh writes 30 fps for 120 Hz captures).
-FPS = {"cmu_16_01_jump_amc2bvh.bvh": 120.0}
 
 
 def measure(path: Path, preset: str, config=None) -> dict:
@@ -45,8 +38,6 @@ def measure(path: Path, preset: str, config=None) -> dict:
 
 
 
-def cell(value, fmt: str = ".2f") -> str:
-    return "-" if value is None else format(value, fmt)
 
 
 def table(preset: str, rows: list[dict]) -> None:
@@ -77,22 +68,7 @@ def table(preset: str, rows: list[dict]) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--presets", default="subtle,cartoon,looney")
-    parser.add_argument("--clips", default="", help="comma-separated substrings of clip names")
-    parser.add_argument("--data", type=Path, default=SHARED)
-    parser.add_argument("--json", type=Path, default=None, help="also write every figure here")
-    args = parser.parse_args()
-    wanted = [s for s in args.clips.split(",") if s]
-    clips = [p for p in sorted(args.data.glob("*.bvh")) if not wanted or any(s in p.name for s in wanted)]
-    if not clips:
-        sys.exit(f"no clips in {args.data} match {args.clips!r}")
-    everything = {}
-    for preset in [p for p in args.presets.split(",") if p]:
-        everything[preset] = [measure(path, preset) for path in clips]
-        table(preset, everything[preset])
-    if args.json:
-        args.json.write_text(json.dumps(everything, indent=1) + "\n")
+    run_bench(__doc__.splitlines()[0], measure, table, presets="subtle,cartoon,looney")
 
 
 if __name__ == "__main__":
