@@ -31,7 +31,8 @@ from .stages.extrapolate import extrapolate, parse_duration, smootherstep
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping, strike_scale
-from .stages.subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints, rubber_groups
+from .stages.subjoints import (SubjointConfig, SubjointHierarchy, build_hierarchy, minor_branches, position_subjoints,
+                               rubber_groups)
 from .tpose import detect_rest_frames
 
 __all__ = [
@@ -151,6 +152,7 @@ def _extrapolate(state: State, config) -> State:
         smooth=config.smooth_frames(frame_time), ramp=sigma, max_speed=config.max_speed,
         still=config.still * skeleton.height() * frame_time,
         torso=(torso_joints(skeleton, state.limbs), config.torso) if config.torso != 1 else None,
+        riders=rider_joints(skeleton),
     )
     return replace(state, positions=positions, notes=notes)
 
@@ -340,11 +342,12 @@ def _constraints(state: State, plan: ConstraintPlan) -> State:
                    findings=state.with_findings(constraints=report))
 
 
-def _orient(state: State, config) -> State:
+def _orient(state: State, plan: tuple) -> State:
+    config, max_speed = plan
     motion = state.motion
     hierarchy, positions = state.rubber()
     sub_rot, sub_pos = recover_orientations(positions, hierarchy, motion, state.captured_rot, state.captured_pos,
-                                            state.pins)
+                                            state.pins, max_speed=max_speed)
     if config.skeleton == "original":
         keep = hierarchy.original
         out_pos, out_rot = sub_pos[:, keep], sub_rot[:, keep]
@@ -378,7 +381,8 @@ STAGES: tuple[Stage, ...] = (
     Stage("constraints", _constraints,
           lambda c: ConstraintPlan(c.contacts, c.target)
           if c.contacts.enabled or c.target or c.stretch or c.auto_stretch.enabled else None),
-    Stage("orient", _orient, lambda c: c.output),
+    Stage("orient", _orient,
+          lambda c: (c.output, c.extrapolate.max_speed if c.extrapolate.enabled else 0.0)),
 )
 
 
@@ -519,6 +523,20 @@ def limb_hinges(skeleton: Skeleton, limbs: dict) -> list[tuple[int, ...]]:
             reach = [skeleton.link_lengths()[c] for c in toes]
             hinges.append(tuple(limb.joints[:3]) + ((toes[int(np.argmax(reach))],) if toes and max(reach) > 0 else ()))
     return hinges
+
+
+def rider_joints(skeleton: Skeleton) -> dict[int, list[int]]:
+    """Joint -> the joints of minor branches riding rigidly on it (toes on a foot, fingers on a hand).
+
+    """
+    rigid = minor_branches(skeleton)
+    out: dict[int, list[int]] = {}
+    for j in np.flatnonzero(rigid):
+        p = int(skeleton.parents[j])
+        while rigid[p]:
+            p = int(skeleton.parents[p])
+        out.setdefault(p, []).append(int(j))
+    return out
 
 
 def torso_joints(skeleton: Skeleton, limbs: dict) -> np.ndarray:

@@ -11,6 +11,8 @@ from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.rotations import quat_angle, quat_between, quat_rotate, quat_slerp
 from mocap_exaggerate.stages.orient import _fit_turn
 
+from .helpers import SAMPLE_DIR
+
 
 
 def test_quat_between_is_the_smallest_rotation():
@@ -98,3 +100,31 @@ def test_rubber_limbs_bend(sample_clip, preset):
     f = h.fraction[between][None, :, None]
     off_line = np.linalg.norm(p - ((1 - f) * a + f * b), axis=-1)
     assert off_line.max() > 0.01 * motion.skeleton.height()
+
+
+def test_toes_keep_to_the_speed_limit_their_foot_keeps():
+    """A toe rides its foot's turn; the foot keeps to the toe's speed and turns no faster than it may go.
+
+    Before, the amc2bvh jump's toes moved 1.7x their captured top speed under a 1.5x limit
+    (the shin swung the foot round faster than anything checked).
+    """
+    from mocap_exaggerate.pipeline import _uncut_hierarchy, rider_joints
+    from mocap_exaggerate.stages.extrapolate import extrapolate
+    from mocap_exaggerate.stages.orient import recover_orientations
+
+    motion = read_bvh(SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh", fps=120.0)[0]
+    skeleton = motion.skeleton
+    rot, pos = motion.world_rotations(), motion.world_positions()
+    hierarchy = _uncut_hierarchy(skeleton)
+    top = np.linalg.norm(np.diff(pos, axis=0), axis=-1).max(axis=0)
+    moving = hierarchy.rigid & (top > 1e-3 * skeleton.height())
+    assert moving.sum() >= 2  # the toes
+
+    def toes(riders, max_speed):
+        moved = extrapolate(pos, sigma=24.0, omega=5.0, smooth=6.0, max_speed=1.5, riders=riders)
+        _, placed = recover_orientations(moved, hierarchy, motion, rot, pos, max_speed=max_speed)
+        assert np.allclose(placed[:, ~hierarchy.rigid], moved[:, ~hierarchy.rigid])  # only riders move
+        return (np.linalg.norm(np.diff(placed, axis=0), axis=-1).max(axis=0)[moving] / top[moving]).max()
+
+    assert toes(None, 0.0) > 1.6
+    assert toes(rider_joints(skeleton), 1.5) <= 1.5 + 1e-6

@@ -39,12 +39,13 @@ def test_presets_read_as_animation_and_keep_their_word(path, preset):
     # No written joint spins round in a frame while the capture turns gently (it did 90-147 degrees).
     assert q["flips"] == 0, where
     # No pops: no joint moves in a frame more than twice the most it ever moves in the capture,
-    # rest-pose ends included. Toes, fingers and twist bones ride rigidly on a turning foot or
-    # forearm and get a little more (2.16x on the amc2bvh jump's toes at landing).
+    # rest-pose ends included. Toes, fingers and twist bones ride rigidly on their foot or
+    # forearm: the foot keeps to its toes' speed and turns no faster than they may go, but at
+    # looney a landing ease still takes the amc2bvh jump's toes to 2.14x (README, known limits).
     jumps = np.array(q["jumps"])
     rigid = result.hierarchy.rigid if result.hierarchy is not None else np.zeros(len(jumps), bool)
     assert jumps[~rigid].max() <= 2.0, (where, q["jump_joint"], q["jump_frame"], jumps[~rigid].max())
-    assert jumps.max() <= 2.25, (where, q["jump_joint"], q["jump_frame"])
+    assert jumps.max() <= (2.15 if preset == "looney" else 2.0), (where, q["jump_joint"], q["jump_frame"])
     limbs = [v["peak"] for k, v in q["stretch"].items() if k.endswith(("_arm", "_leg"))]
     torso = [v["peak"] for k, v in q["stretch"].items() if k in ("spine", "neck")]
     assert max(limbs) <= LIMBS[preset], (where, q["stretch"])

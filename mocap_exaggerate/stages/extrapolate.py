@@ -220,6 +220,7 @@ def extrapolate(
     max_speed: float = 0.0,
     still: float = 0.0,
     torso: tuple[np.ndarray, float] | None = None,
+    riders: dict[int, list[int]] | None = None,
     axis: int = 0,
 ) -> np.ndarray:
     """Exaggerate trajectories away from their Gaussian average.
@@ -239,6 +240,8 @@ def extrapolate(
         captured position, fully exaggerated from 3x that; 0 for always
     torso : ``(joints, share)``: these joints take the root's exaggeration and only ``share``
         of their own on top of it (a torso that swings less but still rides with the hips)
+    riders : joint -> joints that ride rigidly on it (a foot's toes): the joint's speed limit
+        is the slowest of its own and theirs, since whatever it does they do too
 
     Returns
     -------
@@ -277,7 +280,12 @@ def extrapolate(
     if ramp > 0:
         deviation *= end_ramp(len(moved), ramp)[:, None, None]
     if max_speed > 0 and len(moved) > 2:
-        budget = (max_speed - 1.0) * np.linalg.norm(np.diff(moved, axis=0), axis=-1).max(axis=0)
+        top = np.linalg.norm(np.diff(moved, axis=0), axis=-1).max(axis=0)
+        for joint, below in (riders or {}).items():
+            moving = top[below][top[below] > 0]
+            if len(moving):
+                top[joint] = min(top[joint], moving.min())
+        budget = (max_speed - 1.0) * top
         deviation = _limit_speed(deviation, budget, max(int(round(sigma / 3.0)), 2))
     return np.moveaxis(moved + deviation, 0, axis)
 

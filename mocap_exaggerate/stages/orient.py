@@ -24,6 +24,7 @@ from ..kinematics import frame_blocks, local_from_world
 from ..motion import Motion
 from ..rotations import (cross, quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow,
                          quat_rotate, quat_slerp, quat_unroll)
+from .extrapolate import spread_max
 from .subjoints import SubjointHierarchy
 
 __all__ = ["recover_orientations", "motion_from_world", "incoming_joint"]
@@ -112,6 +113,7 @@ def recover_orientations(
     source_rot: np.ndarray,
     source_pos: np.ndarray,
     pins: tuple[np.ndarray, np.ndarray] | None = None,
+    max_speed: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """World orientations ``(F, J', 4)`` of every sub-joint, and positions with rigid branches placed.
 
@@ -121,6 +123,9 @@ def recover_orientations(
     source_rot, source_pos : (F, J, 4) and (F, J, 3) captured world transforms
     pins : original joints ``(k,)`` that turn back to their captured orientation by
         weights ``(F, k)`` (a planted foot keeps its toes down)
+    max_speed : when > 0, a joint carrying a rigid branch turns away from its captured
+        orientation only so fast that no joint of the branch moves more in a frame than
+        ``max_speed`` times its own largest captured one-frame move (see `_calm_riders`)
     """
     skeleton = source.skeleton
     original = hierarchy.original
@@ -163,6 +168,9 @@ def recover_orientations(
     if pins is not None and len(pins[0]):
         joints, weights = pins
         world[:, joints] = quat_slerp(world[:, joints], source_rot[:, joints], weights)
+    if max_speed > 0 and frames > 2:
+        _calm_riders(world, new_pos, source_rot, source_pos, skeleton, rigid, max_speed,
+                     max(int(round(0.05 / source.frame_time)), 2))
 
     # Rigid branches: captured local transforms under the recovered parent.
     for j in range(1, skeleton.num_joints):
@@ -180,6 +188,48 @@ def recover_orientations(
         out[:, between] = _between(world, hierarchy.link_parent[between], hierarchy.link_child[between],
                                    hierarchy.fraction[between])
     return out, sub_pos
+
+
+#: Passes of the riders' speed limit (each leaves less over budget, as in extrapolation's).
+_RIDER_PASSES = 6
+
+
+def _calm_riders(world, new_pos, source_rot, source_pos, skeleton, rigid, max_speed: float, radius: int) -> None:
+    """Slow the turn of joints that carry rigid branches (feet with toes, hands with fingers), in place.
+
+    A rigid branch rides its parent's recovered turn ``D = world source_rot^-1``:
+    a toe sits at ``ankle + D (toe - ankle)_captured``, so a shin swung faster
+    than captured swings the toes faster still, past the speed limit the
+    extrapolation keeps on every joint it moves. Where a rider's one-frame move
+    is over ``max_speed`` times its captured largest, the parent's turn is
+    scaled down (``D^g``, ``g`` from the rider's budget over its step, spread
+    in time like extrapolation's gains so it eases in and out) and measured
+    again. The parent's position is never moved; where its own move uses the
+    budget up, the turn goes as far as back to the captured orientation.
+    """
+    for p in range(skeleton.num_joints):
+        if rigid[p]:
+            continue
+        riders = [int(j) for j in skeleton.descendants(p)[1:] if rigid[j]]
+        if not riders:
+            continue
+        budget = max_speed * np.linalg.norm(np.diff(source_pos[:, riders], axis=0), axis=-1).max(axis=0)
+        turn = quat_mul(world[:, p], quat_inv(source_rot[:, p]))
+        turn = turn * np.where(turn[:, 3:] < 0, -1.0, 1.0)  # the shorter way: D^0 = 1, D^1 = D
+        offsets = source_pos[:, riders] - source_pos[:, p : p + 1]
+        gain = np.ones(len(turn))
+        for _ in range(_RIDER_PASSES):
+            placed = quat_rotate(quat_pow(turn, gain)[:, None], offsets) + new_pos[:, p : p + 1]
+            step = np.linalg.norm(np.diff(placed, axis=0), axis=-1)  # (F-1, riders)
+            share = np.min(np.where(step > budget, budget / np.maximum(step, 1e-300), 1.0), axis=1) * 0.98
+            if share.min() >= 0.98:
+                break
+            need = np.ones(len(turn))
+            need[:-1] = np.minimum(need[:-1], share)
+            need[1:] = np.minimum(need[1:], share)
+            gain = gain * (1.0 - spread_max(1.0 - need, radius))
+        if gain.min() < 1.0:
+            world[:, p] = quat_normalize(quat_mul(quat_pow(turn, gain), source_rot[:, p]))
 
 
 def _between(world: np.ndarray, first: np.ndarray, second: np.ndarray, fraction: np.ndarray) -> np.ndarray:
