@@ -18,6 +18,7 @@ import click
 
 # Only light modules at import time: `--help` must not wait for SciPy, trimesh or pygltflib.
 from mocap_exaggerate import __version__
+from mocap_exaggerate.batch import DEFAULT_GLOB
 from mocap_exaggerate.config import DEFAULT_PRESET, preset_description, preset_names, read_config_text, resolve_config
 from mocap_exaggerate.errors import MocapError
 from mocap_exaggerate.io.files import OutputExistsError
@@ -57,7 +58,13 @@ def _fail_cleanly(func: Callable) -> Callable:
     return wrapper
 
 
+def _keep_raw(ctx, param, values: tuple[str, ...]) -> None:
+    """Remember an option's words as given ('plan' writes them back)."""
+    ctx.meta.setdefault("mocap_exaggerate.raw", {})[param.name] = list(values)
+
+
 def _parse_stretches(ctx, param, values: tuple[str, ...]):
+    _keep_raw(ctx, param, values)
     try:
         return tuple(parse_stretch(v) for v in values)
     except MocapError as error:
@@ -65,6 +72,7 @@ def _parse_stretches(ctx, param, values: tuple[str, ...]):
 
 
 def _parse_targets(ctx, param, values: tuple[str, ...]):
+    _keep_raw(ctx, param, values)
     try:
         return tuple(parse_target(v) for v in values)
     except MocapError as error:
@@ -72,6 +80,7 @@ def _parse_targets(ctx, param, values: tuple[str, ...]):
 
 
 def _parse_weights(ctx, param, values: tuple[str, ...]) -> tuple[tuple[str, float], ...]:
+    _keep_raw(ctx, param, values)
     out = []
     for item in values:
         key, sep, value = item.partition("=")
@@ -148,6 +157,25 @@ def pipeline_options(func: Callable) -> Callable:
         click.option("--tpose", type=click.Choice(["auto", "keep", "drop"]), default=None,
                      help="Leading synthetic rest pose: auto (keep out of filters, unchanged), keep, drop."),
         click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def output_options(func: Callable) -> Callable:
+    """What a conversion writes besides the BVH, shared by ``exaggerate`` and ``batch``."""
+    options = [
+        click.option("--overwrite", is_flag=True, help="Replace outputs that exist already."),
+        click.option("--skin", "skin_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                     help="Skin for the GLB: .npz (vertices, faces, joint_names, weights) bound to the clip's "
+                          "joints in its rest pose. Default: a capsule body grown from the skeleton."),
+        click.option("--units", default="auto", show_default=True,
+                     help="BVH units for the GLB (metres): auto, m, dm, cm, mm, in, ft, cmu."),
+        click.option("--influences", type=click.Choice(["4", "8"]), default="4", show_default=True,
+                     help="Joints per vertex in the GLB: 4 (JOINTS_0) or 8 (a second JOINTS_1/WEIGHTS_1 set)."),
+        click.option("--glb/--no-glb", "write_glb", default=True, show_default=True,
+                     help="Also write OUT/<name>.glb (skinned, animated) and OUT/<name>.weights.npz."),
     ]
     for option in reversed(options):
         func = option(func)
@@ -274,20 +302,12 @@ def cli() -> None:
 
 
 @cli.command()
-@click.argument("input_path", metavar="IN.bvh", type=click.Path(path_type=Path, allow_dash=True))
+@click.argument("input_paths", metavar="IN.bvh...", nargs=-1, required=True,
+                type=click.Path(path_type=Path, allow_dash=True))
 @click.option("-o", "--output", "output", required=True, type=click.Path(path_type=Path, allow_dash=True),
               help="Output folder (created if needed), or - to write the BVH to stdout.")
 @click.option("--name", default=None, help="Output file stem (default: the input's; 'stdin' for -).")
-@click.option("--overwrite", is_flag=True, help="Replace outputs that exist already.")
-@click.option("--skin", "skin_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Skin for the GLB: .npz (vertices, faces, joint_names, weights) bound to the clip's joints "
-                   "in its rest pose. Default: a capsule body grown from the skeleton.")
-@click.option("--units", default="auto", show_default=True,
-              help="BVH units for the GLB (metres): auto, m, dm, cm, mm, in, ft, cmu.")
-@click.option("--influences", type=click.Choice(["4", "8"]), default="4", show_default=True,
-              help="Joints per vertex in the GLB: 4 (JOINTS_0) or 8 (a second JOINTS_1/WEIGHTS_1 set).")
-@click.option("--glb/--no-glb", "write_glb", default=True, show_default=True,
-              help="Also write OUT/<name>.glb (skinned, animated) and OUT/<name>.weights.npz.")
+@output_options
 @click.option("--trails", "trails_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the original and exaggerated end-effector paths of every stretch as JSON.")
 @click.option("--path-file", "path_file", type=click.Path(dir_okay=False, path_type=Path), default=None,
@@ -295,9 +315,12 @@ def cli() -> None:
 @pipeline_options
 @verbosity_options
 @_fail_cleanly
-def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool, skin_path: Path | None,
+def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, overwrite: bool, skin_path: Path | None,
                units: str, influences: str, write_glb: bool, trails_path: Path | None, path_file: Path | None, **options) -> None:
-    """Exaggerate one clip: writes OUT/<name>.bvh, .glb, .weights.npz and .json (manifest).
+    """Exaggerate clips: writes OUT/<name>.bvh, .glb, .weights.npz and .json (manifest) for each.
+
+    With several files, a bad one is reported and the rest go on (exit 1 if any
+    failed); for whole folders see 'batch'.
 
     \b
     Examples:
@@ -308,8 +331,13 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
       mocap-exaggerate exaggerate walk.bvh -o out/ --skeleton original   # original joint set
       mocap-exaggerate exaggerate punch.bvh -o out/ --stretch "left_arm:120-160:3:axes=xz:ease_in=0.6,0.2"
       mocap-exaggerate exaggerate fight.bvh -o out/ --preset looney --auto-stretch -v
+      mocap-exaggerate exaggerate walk.bvh run.bvh jump.bvh -o out/
       cat walk.bvh | mocap-exaggerate exaggerate - -o - > walk_cartoon.bvh
     """
+    if len(input_paths) > 1:
+        return _exaggerate_several(input_paths, output, name, overwrite, skin_path, units, influences, write_glb,
+                                   trails_path, path_file, options)
+    input_path = input_paths[0]
     from mocap_exaggerate.job import convert
 
     preset, config = _config_from_options(options)
@@ -344,6 +372,210 @@ def exaggerate(input_path: Path, output: Path, name: str | None, overwrite: bool
             f"{record.seconds:.2f} s",
             err=True,
         )
+
+
+def _check_output_settings(units: str, influences: str, skin_path: Path | None) -> None:
+    """Refuse a bad unit or skin once, before any file of a batch runs (each would fail alike)."""
+    from mocap_exaggerate.io.gltf import unit_scale
+    from mocap_exaggerate.io.skin import load_skin
+
+    unit_scale(units, 1.0)
+    if skin_path is not None:
+        load_skin(skin_path)
+
+
+def _batch_options(options: dict[str, Any], *, overwrite: bool, resume: bool, write_glb: bool,
+                   skin_path: Path | None, units: str, influences: str):
+    from mocap_exaggerate.batch import BatchOptions
+
+    preset, config = _config_from_options(options)
+    if write_glb:
+        _check_output_settings(units, influences, skin_path)
+    return BatchOptions(config, preset=preset, overwrite=overwrite, resume=resume, glb=write_glb,
+                        skin=str(skin_path.resolve()) if skin_path is not None else None, units=units,
+                        influences=int(influences))
+
+
+def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bool, problems=()) -> int:
+    """Run a batch with progress and a summary; the exit code (0 all done, 1 some failed, 130 interrupted)."""
+    import time
+
+    from mocap_exaggerate.batch import BatchInterrupted, run_batch
+
+    from .report import Progress, summary
+
+    quiet = _quiet()
+    progress = Progress(len(clips) + len(problems), quiet=quiet, as_json=as_json)
+    for problem in problems:
+        progress(problem)
+    started = time.perf_counter()
+    workers = min(jobs, max(len(clips), 1))
+    try:
+        results = run_batch(clips, out_dir, batch_options, jobs=jobs, on_result=progress)
+        pending = 0
+    except BatchInterrupted as stop:
+        results, pending = stop.results, len(stop.pending)
+    finally:
+        progress.close()
+    results = list(problems) + results
+    summary(results, time.perf_counter() - started, workers=workers, pending=pending, quiet=quiet)
+    if pending:
+        return 130
+    return 1 if any(r.status == "failed" for r in results) else 0
+
+
+def _exaggerate_several(input_paths, output: Path, name, overwrite, skin_path, units, influences, write_glb,
+                        trails_path, path_file, options) -> None:
+    from mocap_exaggerate.batch import Clip
+
+    if any(str(p) == "-" for p in input_paths):
+        raise UserError("'-' (standard input) can only be the one input")
+    if str(output) == "-":
+        raise UserError("-o - (standard output) takes one input; give a folder for several")
+    for flag, value in (("--name", name), ("--trails", trails_path), ("--path-file", path_file)):
+        if value is not None:
+            raise UserError(f"{flag} belongs to one clip; give one input with it")
+    if output.exists() and not output.is_dir():
+        raise UserError(f"{output}: exists and is not a folder")
+    stems: dict[str, Path] = {}
+    for path in input_paths:
+        other = stems.setdefault(path.stem.casefold(), path)
+        if other is not path:
+            raise UserError(f"{other} and {path} would write the same outputs in {output}; convert them apart "
+                            f"(or use 'batch', which mirrors folders)")
+    batch_options = _batch_options(options, overwrite=overwrite, resume=False, write_glb=write_glb,
+                                   skin_path=skin_path, units=units, influences=influences)
+    clips = [Clip(path, Path(path.name)) for path in input_paths]
+    code = _run_reported(clips, output, batch_options, jobs=1, as_json=False)
+    if code:
+        click.get_current_context().exit(code)
+
+
+@cli.command()
+@click.argument("in_dir", metavar="IN_DIR", type=click.Path(path_type=Path))
+@click.argument("out_dir", metavar="OUT_DIR", type=click.Path(path_type=Path))
+@click.option("--glob", "pattern", default=DEFAULT_GLOB, show_default=True,
+              help="Which files under IN_DIR, by their path under it (case-insensitive; ** is any folders).")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
+              help="Worker processes (default: one per core).")
+@click.option("--resume", is_flag=True,
+              help="Keep clips whose outputs are complete and made from the same input and options; redo the rest.")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print one JSON line per file on stdout (input, outputs, status, frames, seconds, "
+                   "max_link_stretch, error).")
+@output_options
+@pipeline_options
+@verbosity_options
+@_fail_cleanly
+def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: bool, as_json: bool, overwrite: bool,
+          skin_path: Path | None, units: str, influences: str, write_glb: bool, **options) -> None:
+    """Exaggerate every clip under IN_DIR into OUT_DIR, mirroring its folders.
+
+    A bad file is reported and the rest go on; exit 0 when every file was
+    converted (or kept by --resume), 1 when some failed, 2 for a usage
+    mistake, 130 when stopped with Ctrl-C (clips being converted finish).
+
+    \b
+    Examples:
+      mocap-exaggerate batch mocap/ out/ --preset looney -j 2
+      mocap-exaggerate batch mocap/ out/ --resume --json > results.jsonl
+      mocap-exaggerate batch mocap/ out/ --glob 'walk*/**/*.bvh' --no-glb
+    """
+    from mocap_exaggerate.batch import default_jobs, find_clips
+
+    in_dir, out_dir = _batch_folders(in_dir, out_dir)
+    batch_options = _batch_options(options, overwrite=overwrite, resume=resume, write_glb=write_glb,
+                                   skin_path=skin_path, units=units, influences=influences)
+    clips, problems = find_clips(in_dir, pattern, exclude=[out_dir])
+    if not clips:
+        for problem in problems:
+            log.warning("%s: %s", problem.input, problem.error)
+        raise UserError(f"{in_dir}: no file matches {pattern!r} (see --glob)")
+    code = _run_reported(clips, out_dir, batch_options, jobs=jobs or default_jobs(), as_json=as_json,
+                         problems=problems)
+    if code:
+        click.get_current_context().exit(code)
+
+
+def _batch_folders(in_dir: Path, out_dir: Path) -> tuple[Path, Path]:
+    if not in_dir.exists():
+        raise UserError(f"{in_dir}: no such folder")
+    if not in_dir.is_dir():
+        raise UserError(f"{in_dir}: is a file; give the folder it is in (or use 'exaggerate' for files)")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"{out_dir}: exists and is not a folder")
+    if out_dir.resolve() == in_dir.resolve():
+        raise UserError(f"{out_dir}: is the input folder; the outputs would sit among the clips")
+    return in_dir, out_dir
+
+
+@cli.command()
+@click.argument("in_dir", metavar="IN_DIR", type=click.Path(path_type=Path))
+@click.argument("out_dir", metavar="OUT_DIR", type=click.Path(path_type=Path))
+@click.option("--glob", "pattern", default=DEFAULT_GLOB, show_default=True,
+              help="Which files under IN_DIR, by their path under it (case-insensitive; ** is any folders).")
+@output_options
+@pipeline_options
+@verbosity_options
+@_fail_cleanly
+def plan(in_dir: Path, out_dir: Path, pattern: str, overwrite: bool, skin_path: Path | None, units: str,
+         influences: str, write_glb: bool, **options) -> None:
+    """Print one self-contained 'exaggerate' command per clip under IN_DIR, for a farm's job list.
+
+    Each line converts one clip into the place 'batch' would put it, with the
+    options given here (paths made absolute); feed the lines to Deadline,
+    OpenCue, a Slurm array or xargs. Nothing is converted or written.
+
+    \b
+    Examples:
+      mocap-exaggerate plan mocap/ /farm/out --preset looney > jobs.txt
+      mocap-exaggerate plan mocap/ out/ | xargs -P 8 -I{} sh -c {}
+    """
+    import shlex
+
+    from mocap_exaggerate.batch import find_clips
+
+    in_dir, out_dir = _batch_folders(in_dir, out_dir)
+    _batch_options(options, overwrite=overwrite, resume=False, write_glb=write_glb, skin_path=skin_path,
+                   units=units, influences=influences)  # a bad setting is refused here, not on the farm
+    clips, problems = find_clips(in_dir, pattern, exclude=[out_dir])
+    for problem in problems:
+        log.warning("%s: %s", problem.input, problem.error)
+    if not clips:
+        raise UserError(f"{in_dir}: no file matches {pattern!r} (see --glob)")
+    given = _given_options(click.get_current_context(), exclude={"pattern"})
+    for clip in clips:
+        folder = (out_dir / clip.relative.parent).resolve()
+        words = ["mocap-exaggerate", "exaggerate", str(clip.source.resolve()), "-o", str(folder),
+                 "--name", clip.name, *given]
+        click.echo(shlex.join(words))
+
+
+def _given_options(ctx: click.Context, exclude: set[str]) -> list[str]:
+    """The options given on this command line, written back as arguments (paths made absolute)."""
+    from click.core import ParameterSource
+
+    words: list[str] = []
+    for param in ctx.command.params:
+        if not isinstance(param, click.Option) or param.name in exclude or param.expose_value is False:
+            continue
+        if ctx.get_parameter_source(param.name) != ParameterSource.COMMANDLINE:
+            continue
+        value = ctx.params[param.name]
+        if param.is_flag and param.secondary_opts:  # --x/--no-x
+            words.append(param.opts[0] if value else param.secondary_opts[0])
+        elif param.is_flag:
+            if value:
+                words.append(param.opts[0])
+        else:
+            # Parsed values go back as the user wrote them: raw strings for options parsed by a callback.
+            raw = ctx.meta.get("mocap_exaggerate.raw", {}).get(param.name)
+            values = raw if raw is not None else (value if param.multiple else [value])
+            for item in values:
+                if isinstance(item, Path):
+                    item = item.resolve()
+                words += [param.opts[-1] if param.opts[-1].startswith("--") else param.opts[0], str(item)]
+    return words
 
 
 @cli.command()

@@ -36,7 +36,8 @@ from .pipeline import PipelineResult, run
 from .skinning import Skin
 from .tpose import detect_rest_frames
 
-__all__ = ["JobRecord", "convert", "output_paths", "check_name", "check_targets", "check_output_set", "describe"]
+__all__ = ["JobRecord", "convert", "output_paths", "check_name", "check_targets", "check_output_set", "describe",
+           "parameters_digest"]
 
 #: Longest output name accepted: leaves room for suffixes and temporary names within 255 bytes.
 MAX_NAME = 200
@@ -112,6 +113,31 @@ def _default_name(source: Source) -> str:
     if hasattr(source, "read") or str(source) == "-":
         return "stdin"
     return Path(source).stem
+
+
+def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb: bool = True, units: str = "auto",
+                      influences: int = 4, skin: Skin | str | os.PathLike | None = None,
+                      path_file: str | os.PathLike | None = None) -> str:
+    """``sha256:<hex>`` of everything besides the input that decides a job's output files.
+
+    The resolved pipeline (whatever preset, file or flags it came from), the
+    output options, the skin's and edited paths' bytes, and the tool's version.
+    The manifest records it as ``parameters``; ``batch --resume`` redoes a clip
+    whose manifest names other parameters.
+    """
+    def content(thing):
+        if thing is None:
+            return None
+        if isinstance(thing, Skin):
+            return file_digest([np.ascontiguousarray(a).tobytes() for a in (thing.vertices, thing.faces, thing.joints, thing.weights)]
+                               + ["\n".join(thing.joint_names).encode("utf-8")])
+        return file_digest(Path(thing).read_bytes())
+
+    from . import __version__
+
+    fields = {"version": __version__, "preset": preset, "config": config.to_dict(), "glb": bool(glb),
+              "units": units, "influences": int(influences), "skin": content(skin), "path_file": content(path_file)}
+    return file_digest(json.dumps(fields, sort_keys=True, default=str).encode("utf-8"))
 
 
 def check_targets(targets: dict[str, Path], inputs: list[Path], overwrite: bool) -> None:
@@ -208,6 +234,8 @@ def convert(
     from .io.trails import read_trails
 
     paths = read_trails(path_file) if path_file is not None else None
+    parameters = parameters_digest(config, preset=preset, glb=glb, units=units, influences=influences, skin=skin,
+                                   path_file=path_file) if not to_stream else None
     if skin is not None:
         skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
 
@@ -265,6 +293,7 @@ def convert(
             info = manifest(input_name=label, input_hash=input_hash, config=config, preset=preset, result=result,
                             outputs=listed, reader_warnings=report.warnings, frames_in=motion.num_frames,
                             fps=motion.fps, timings=timings)
+            info["parameters"] = parameters
             written.add(targets["manifest"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))
         written.commit(retire_first=[targets["manifest"], *retired] if "manifest" in targets else [])
     return JobRecord(

@@ -1,0 +1,103 @@
+"""How the command line tells the user about many files: progress, one line per file, a summary.
+
+On a terminal, a progress bar (files done, frames/s, time left) with failures
+printed above it as they happen; otherwise one plain line per file, which a
+log file or a farm's console keeps. ``--json`` adds one JSON line per file on
+stdout. Only reporting lives here; the work is `mocap_exaggerate.batch`.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from typing import TextIO
+
+import click
+
+from mocap_exaggerate.batch import FileResult
+
+
+def _terminal_width(stream: TextIO) -> int:
+    """Columns of the terminal ``stream`` writes to; 0 when it is not one (a file, a pipe, a sizeless pty)."""
+    try:
+        return os.get_terminal_size(stream.fileno()).columns if stream.isatty() else 0
+    except (OSError, ValueError, AttributeError):
+        return 0
+
+
+def _said(result: FileResult) -> str:
+    """The error without the file name repeated ("a.bvh:3: ..." already names it)."""
+    error = result.error or ""
+    return error if error.startswith(result.input) else f"{result.input}: {error}"
+
+
+class Progress:
+    """Called with each `FileResult` as it finishes."""
+
+    def __init__(self, total: int, *, quiet: bool = False, as_json: bool = False, stream: TextIO | None = None,
+                 bar: bool | None = None, verb: str = "converted") -> None:
+        self.total, self.quiet, self.as_json, self.verb = total, quiet, as_json, verb
+        self.stream = stream or sys.stderr
+        self.count = 0
+        self.frames = 0
+        self.started = time.perf_counter()
+        use_bar = bar if bar is not None else (not quiet and total > 1 and _terminal_width(self.stream) >= 40)
+        self.bar = None
+        if use_bar:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, unit="file", file=self.stream, dynamic_ncols=True, leave=True,
+                            bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} files [{elapsed}<{remaining}{postfix}]")
+
+    def __call__(self, result: FileResult) -> None:
+        self.count += 1
+        if result.status == "converted":
+            self.frames += result.frames or 0
+        if self.as_json:
+            click.echo(result.to_json())  # stdout: one line per file, for farm tooling
+        if self.bar is not None:
+            if result.status == "failed":
+                self.bar.write(f"failed: {_said(result)}", file=self.stream)
+            elapsed = max(time.perf_counter() - self.started, 1e-9)
+            self.bar.set_postfix_str(f"{self.frames / elapsed:,.0f} frames/s", refresh=False)
+            self.bar.update(1)
+            return
+        if result.status == "failed":
+            click.echo(f"[{self.count}/{self.total}] failed: {_said(result)}", file=self.stream)
+        elif not self.quiet:
+            detail = (f"{result.frames} frames, max link stretch {result.max_link_stretch:.2f}x, {result.seconds:.2f} s"
+                      if result.status == "converted" else result.error)
+            click.echo(f"[{self.count}/{self.total}] {result.status} {result.input} ({detail})", file=self.stream)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def summary(results: list[FileResult], seconds: float, *, workers: int, pending: int = 0,
+            quiet: bool = False, stream: TextIO | None = None) -> None:
+    """The table at the end: converted, skipped, failed (with reasons), frames, time."""
+    stream = stream or sys.stderr
+    counts = {status: sum(r.status == status for r in results) for status in ("converted", "skipped", "failed")}
+    frames = sum(r.frames or 0 for r in results if r.status == "converted")
+    failed = [r for r in results if r.status == "failed"]
+    if quiet:
+        for result in failed:
+            click.echo(f"failed: {_said(result)}", file=stream)
+        return
+    files = len(results) + pending
+    rate = f", {frames / seconds:,.0f} frames/s" if seconds > 0 and frames else ""
+    click.echo(f"\n{files} file(s) in {seconds:.1f} s with {workers} worker(s): {frames:,} frames converted{rate}",
+               file=stream)
+    click.echo(f"  converted  {counts['converted']:>6}", file=stream)
+    click.echo(f"  skipped    {counts['skipped']:>6}", file=stream)
+    click.echo(f"  failed     {counts['failed']:>6}", file=stream)
+    if pending:
+        click.echo(f"  not started{pending:>6}  (interrupted; run again with --resume to finish)", file=stream)
+    skipped = [r for r in results if r.status == "skipped" and r.error and "complete" not in r.error]
+    for result in skipped:
+        click.echo(f"skipped: {_said(result)}", file=stream)
+    for result in failed:
+        click.echo(f"failed: {_said(result)}", file=stream)

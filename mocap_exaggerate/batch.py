@@ -1,0 +1,395 @@
+"""Whole folders of clips: find them, convert each in a worker process, resume, report per file.
+
+`find_clips` walks a folder for clips; `run_batch` converts them with `convert`
+(in this process, or in a pool of worker processes that pay the imports once)
+and hands each file's `FileResult` to a callback as it finishes; a farm task
+calls `convert_file` on one clip. Nothing here stops at a bad file: it is
+reported (status ``failed`` with the reason) and the rest go on. Every output
+set is written the way `convert` writes it (temporary files renamed into
+place, the manifest last), so a killed run leaves no half-written file, and
+``resume`` redoes only the clips whose output set is not complete for the same
+input bytes and the same parameters.
+
+Example::
+
+    from mocap_exaggerate import load_preset
+    from mocap_exaggerate.batch import BatchOptions, find_clips, run_batch
+
+    clips, problems = find_clips("mocap/")
+    results = run_batch(clips, "out/", BatchOptions(load_preset("cartoon")), jobs=2)
+    [r.input for r in results if r.status == "failed"]
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable
+
+from .config import PipelineConfig
+from .errors import MocapError
+from .io.files import OutputExistsError
+
+__all__ = ["Clip", "BatchOptions", "FileResult", "BatchInterrupted", "find_clips", "glob_regex", "convert_file",
+           "run_batch", "is_complete", "DEFAULT_GLOB"]
+
+#: Which files a batch takes: every .bvh at any depth (matched without regard to case).
+DEFAULT_GLOB = "**/*.bvh"
+
+#: Modules a worker imports once, before its first clip.
+_PRELOAD = ["mocap_exaggerate.job", "mocap_exaggerate.outputs", "mocap_exaggerate.io.gltf",
+            "mocap_exaggerate.body", "mocap_exaggerate.skinning"]
+
+
+@dataclass(frozen=True)
+class Clip:
+    """One input of a batch.
+
+    source : the file
+    relative : where it sits under the input folder; its outputs sit at the same
+        place under the output folder (``walk/a.bvh`` -> ``OUT/walk/a.bvh``, ``.glb``, ...)
+    """
+
+    source: Path
+    relative: Path
+
+    @property
+    def name(self) -> str:
+        return self.relative.stem
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """What every clip of a batch is converted with (`convert`'s options).
+
+    resume : keep the clips whose output set is complete and was made from the same
+        input bytes with the same parameters; redo the rest (replacing what they left)
+    overwrite : replace existing outputs; without it (or resume) a clip whose outputs
+        exist fails, saying so
+    """
+
+    config: PipelineConfig
+    preset: str | None = None
+    overwrite: bool = False
+    resume: bool = False
+    glb: bool = True
+    skin: str | None = None
+    units: str = "auto"
+    influences: int = 4
+
+
+@dataclass
+class FileResult:
+    """What happened to one file: ``converted``, ``skipped`` or ``failed`` (with ``error``)."""
+
+    input: str
+    status: str
+    outputs: dict[str, str] = field(default_factory=dict)
+    frames: int | None = None
+    seconds: float = 0.0
+    max_link_stretch: float | None = None
+    error: str | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    def to_json(self) -> str:
+        """One line of JSON (``batch --json``)."""
+        return json.dumps(asdict(self), sort_keys=False)
+
+
+class BatchInterrupted(Exception):
+    """Ctrl-C during `run_batch`: the files that finished (``results``) and those never started (``pending``)."""
+
+    def __init__(self, results: list[FileResult], pending: list[Clip]) -> None:
+        super().__init__(f"interrupted: {len(results)} file(s) finished, {len(pending)} not started")
+        self.results = results
+        self.pending = pending
+
+
+# ---------------------------------------------------------------------------- finding clips
+
+
+def glob_regex(pattern: str) -> re.Pattern:
+    """A compiled regex for a ``/``-separated glob over relative paths, case-insensitive.
+
+    ``*`` and ``?`` stay inside one folder name, ``[...]`` is a character set
+    (``[!...]`` its complement), a ``**`` segment matches any number of folders,
+    none included.
+
+    >>> bool(glob_regex("**/*.bvh").fullmatch("walk/fast/A.BVH")), bool(glob_regex("*.bvh").fullmatch("walk/a.bvh"))
+    (True, False)
+    """
+    parts = pattern.replace("\\", "/").strip("/").split("/")
+    out = []
+    for index, part in enumerate(parts):
+        last = index == len(parts) - 1
+        if part == "**":
+            out.append(".*" if last else "(?:[^/]+/)*")
+            continue
+        piece, i = [], 0
+        while i < len(part):
+            c = part[i]
+            if c == "*":
+                piece.append("[^/]*")
+            elif c == "?":
+                piece.append("[^/]")
+            elif c == "[":
+                start = i + 1 + (part[i + 1:i + 2] == "!")
+                end = part.find("]", start + 1)  # a "]" first in the set is one of its characters
+                if end < 0:
+                    piece.append(re.escape(c))
+                else:
+                    body = part[start:end].replace("\\", "\\\\").replace("^", "\\^")
+                    piece.append(f"[{'^' if start > i + 1 else ''}{body}]")
+                    i = end
+            else:
+                piece.append(re.escape(c))
+            i += 1
+        out.append("".join(piece) + ("" if last else "/"))
+    return re.compile("".join(out), re.IGNORECASE | re.DOTALL)
+
+
+def find_clips(folder: str | os.PathLike, pattern: str = DEFAULT_GLOB, *,
+               exclude: Iterable[str | os.PathLike] = ()) -> tuple[list[Clip], list[FileResult]]:
+    """The clips under ``folder`` whose relative path matches ``pattern``, sorted by that path.
+
+    Folders reached through symbolic links are followed once: a link back to a
+    folder already walked (a loop) is reported and not entered. A folder that
+    cannot be listed is reported; so are two clips whose outputs would be the
+    same files (``a.bvh`` and ``a.BVH``). ``exclude``: folders not to walk (the
+    output folder, when it is inside the input folder).
+
+    Returns the clips and the problems (`FileResult` with status ``failed`` or,
+    for loops, ``skipped``).
+    """
+    top = Path(folder)
+    regex = glob_regex(pattern)
+    problems: list[FileResult] = []
+    skip = set()
+    for path in exclude:
+        try:
+            st = os.stat(path)
+            skip.add((st.st_dev, st.st_ino))
+        except OSError:
+            pass
+    st = os.stat(top)
+    seen = {(st.st_dev, st.st_ino)}
+
+    def unlistable(error: OSError) -> None:
+        problems.append(FileResult(str(error.filename), "failed", error=f"cannot list the folder: {error.strerror}"))
+
+    found: list[Clip] = []
+    for here, folders, files in os.walk(top, followlinks=True, onerror=unlistable):
+        keep = []
+        for name in sorted(folders):
+            path = os.path.join(here, name)
+            try:
+                st = os.stat(path)
+            except OSError as error:  # a link to nowhere, a folder gone meanwhile
+                problems.append(FileResult(path, "failed", error=f"cannot open: {error.strerror}"))
+                continue
+            key = (st.st_dev, st.st_ino)
+            if key in skip:
+                continue
+            if key in seen:
+                problems.append(FileResult(path, "skipped", error="a link to a folder already walked (a loop?): "
+                                                                  "not entered"))
+                continue
+            seen.add(key)
+            keep.append(name)
+        folders[:] = keep
+        for name in files:
+            path = Path(here) / name
+            relative = path.relative_to(top)
+            if regex.fullmatch(relative.as_posix()):
+                found.append(Clip(path, relative))
+    found.sort(key=lambda clip: clip.relative.as_posix())
+    clips, owners = [], {}
+    for clip in found:
+        key = (clip.relative.parent.as_posix().casefold(), clip.name.casefold())
+        if key in owners:
+            problems.append(FileResult(str(clip.source), "failed",
+                                       error=f"its outputs would be those of {owners[key].source}; rename one"))
+            continue
+        owners[key] = clip
+        clips.append(clip)
+    return clips, problems
+
+
+# ---------------------------------------------------------------------------- one file
+
+
+def is_complete(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions, parameters: str | None = None) -> bool:
+    """Whether ``clip``'s output set under ``out_dir`` is complete and was made from these input
+    bytes with these parameters (`parameters_digest`; computed when not given)."""
+    from .job import check_output_set, parameters_digest
+    from .outputs import file_digest
+
+    manifest = Path(out_dir) / clip.relative.parent / f"{clip.name}.json"
+    if check_output_set(manifest):
+        return False
+    try:
+        info = json.loads(manifest.read_text(encoding="utf-8"))
+        recorded_input, recorded_parameters = info["input"]["hash"], info["parameters"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    if parameters is None:
+        parameters = parameters_digest(options.config, preset=options.preset, glb=options.glb, units=options.units,
+                                       influences=options.influences, skin=options.skin)
+    if recorded_parameters != parameters:
+        return False
+    try:
+        return file_digest(clip.source.read_bytes()) == recorded_input
+    except OSError:
+        return False
+
+
+def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
+                 parameters: str | None = None) -> FileResult:
+    """Convert one clip of a batch into ``out_dir/<its folder>/``; never raises for a bad file.
+
+    Whatever goes wrong (a malformed or unreadable file, outputs that exist, a
+    full disk, a bug) is the returned result's ``error``, in one line.
+    """
+    from .job import convert
+
+    started = time.perf_counter()
+    label = str(clip.source)
+
+    def failed(message: str) -> FileResult:
+        return FileResult(label, "failed", seconds=time.perf_counter() - started, error=message)
+
+    try:
+        if options.resume and is_complete(clip, out_dir, options, parameters):
+            return FileResult(label, "skipped", seconds=time.perf_counter() - started,
+                              error="outputs complete, from the same input and parameters")
+        record = convert(clip.source, Path(out_dir) / clip.relative.parent, options.config, preset=options.preset,
+                         name=clip.name, overwrite=options.overwrite or options.resume, glb=options.glb,
+                         skin=options.skin, units=options.units, influences=options.influences)
+    except OutputExistsError as error:
+        return failed(f"{error}; pass --overwrite to replace, or --resume to keep finished clips")
+    except MocapError as error:
+        return failed(str(error))
+    except OSError as error:
+        where = f"{error.filename}: " if getattr(error, "filename", None) else ""
+        return failed(f"{where}{error.strerror or error}")
+    except MemoryError:
+        return failed("out of memory")
+    except Exception as error:  # a bug: reported with the file, and the rest go on
+        return failed(f"internal error, please report it: {type(error).__name__}: {error}")
+    return FileResult(label, "converted", outputs={kind: str(path) for kind, path in record.outputs.items()},
+                      frames=record.frames, seconds=time.perf_counter() - started,
+                      max_link_stretch=round(record.max_link_stretch, 6),
+                      warnings=list(record.warnings) + list(record.notes))
+
+
+# ---------------------------------------------------------------------------- many files
+
+
+def _worker_start() -> None:
+    """In each worker: Ctrl-C is the parent's to handle (it lets running clips finish)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    import importlib
+
+    for module in _PRELOAD:
+        importlib.import_module(module)
+
+
+@contextmanager
+def _one_thread_per_worker():
+    """Workers use one BLAS thread each: N workers on N cores, not N x N threads."""
+    names = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+    before = {name: os.environ.get(name) for name in names}
+    for name in names:
+        os.environ.setdefault(name, "1")
+    try:
+        yield
+    finally:
+        for name, value in before.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
+def default_jobs() -> int:
+    """The worker processes a batch uses by default: the cores this process may run on."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except AttributeError:  # not Linux
+        return max(os.cpu_count() or 1, 1)
+
+
+def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptions, *, jobs: int = 1,
+              on_result: Callable[[FileResult], None] | None = None) -> list[FileResult]:
+    """Convert ``clips`` into ``out_dir``; the results in the clips' order.
+
+    ``jobs`` > 1 converts in that many worker processes; ``on_result`` hears
+    about each file as it finishes (in the order they finish). The outputs are
+    the same bytes whichever way they ran. Ctrl-C (KeyboardInterrupt) lets the
+    clips being converted finish, starts no more, and raises `BatchInterrupted`.
+    """
+    from .job import parameters_digest
+
+    parameters = parameters_digest(options.config, preset=options.preset, glb=options.glb, units=options.units,
+                                   influences=options.influences, skin=options.skin)
+    order = {clip: index for index, clip in enumerate(clips)}
+    done: dict[Clip, FileResult] = {}
+
+    def finished(clip: Clip, result: FileResult) -> None:
+        done[clip] = result
+        if on_result is not None:
+            on_result(result)
+
+    if jobs <= 1 or len(clips) <= 1:
+        for clip in clips:
+            try:
+                finished(clip, convert_file(clip, out_dir, options, parameters))
+            except KeyboardInterrupt:
+                raise BatchInterrupted(_in_order(done, order), [c for c in clips if c not in done]) from None
+        return _in_order(done, order)
+
+    import multiprocessing
+
+    context = multiprocessing.get_context("forkserver" if "forkserver" in multiprocessing.get_all_start_methods()
+                                          else "spawn")
+    with _one_thread_per_worker():
+        pool = ProcessPoolExecutor(max_workers=min(jobs, len(clips)), mp_context=context, initializer=_worker_start)
+        futures = {pool.submit(convert_file, clip, out_dir, options, parameters): clip for clip in clips}
+        try:
+            for future in as_completed(futures):
+                clip = futures[future]
+                try:
+                    result = future.result()
+                except BrokenProcessPool:
+                    result = FileResult(str(clip.source), "failed",
+                                        error="its worker process died (out of memory, or killed)")
+                finished(clip, result)
+        except KeyboardInterrupt:
+            for future in futures:
+                future.cancel()
+            try:  # the clips being converted finish (the workers ignore Ctrl-C); a second Ctrl-C stops them too
+                for future, clip in futures.items():
+                    if not future.cancelled():
+                        try:
+                            finished(clip, future.result())
+                        except BrokenProcessPool:
+                            pass
+            except KeyboardInterrupt:
+                for process in list(getattr(pool, "_processes", {}).values()):
+                    process.terminate()
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise BatchInterrupted(_in_order(done, order), [c for c in clips if c not in done]) from None
+        pool.shutdown(wait=True)
+    return _in_order(done, order)
+
+
+def _in_order(done: dict[Clip, FileResult], order: dict[Clip, int]) -> list[FileResult]:
+    return [done[clip] for clip in sorted(done, key=order.__getitem__)]

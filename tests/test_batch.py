@@ -1,0 +1,317 @@
+"""Whole folders (issue 12): `batch`, several files to `exaggerate`, resume, pools, `plan`.
+
+Run the way users run them: a real process, its exit code and stderr, the files it leaves.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from mocap_exaggerate import load_preset
+from mocap_exaggerate.batch import BatchOptions, Clip, find_clips, glob_regex, run_batch
+from mocap_exaggerate.job import check_output_set
+
+from .helpers import SAMPLE_DIR
+
+RUN = SAMPLE_DIR / "cmu_09_01_run_daz.bvh"
+SIT = SAMPLE_DIR / "mocapbank_sit_down_stand_up.bvh"
+JUMP = SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh"
+SUFFIXES = (".bvh", ".glb", ".weights.npz", ".pipeline.toml", ".json")
+
+
+def command(*args, timeout=300, **kwargs):
+    kwargs.setdefault("stdout", subprocess.PIPE)
+    return subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", *map(str, args)],
+                          stderr=subprocess.PIPE, text=True, timeout=timeout, **kwargs)
+
+
+def mixed_folder(root: Path) -> Path:
+    """Good clips in sub-folders, and every kind of bad file a library holds."""
+    folder = root / "mocap"
+    (folder / "walks" / "slow").mkdir(parents=True)
+    (folder / "jumps").mkdir()
+    shutil.copy(RUN, folder / "walks" / "run.bvh")
+    shutil.copy(SIT, folder / "walks" / "slow" / "sit.BVH")  # any case
+    shutil.copy(JUMP, folder / "jumps" / "jump.bvh")
+    (folder / "empty.bvh").write_bytes(b"")
+    (folder / "picture.bvh").write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
+    (folder / "broken.bvh").write_bytes(RUN.read_bytes()[:3000])  # cut off mid-hierarchy
+    (folder / "notes.txt").write_text("not a clip, not matched")
+    (folder / "gone.bvh").symlink_to(folder / "nowhere.bvh")  # unreadable: a link to nothing
+    (folder / "jumps" / "again").symlink_to(folder)  # a loop
+    return folder
+
+
+def files_under(folder: Path) -> set[str]:
+    return {p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()}
+
+
+def expected_outputs(*stems: str) -> set[str]:
+    return {stem + suffix for stem in stems for suffix in SUFFIXES}
+
+
+# ---------------------------------------------------------------------------- finding clips
+
+
+def test_the_glob_matches_paths_by_folder_and_without_regard_to_case():
+    deep = glob_regex("**/*.bvh")
+    assert deep.fullmatch("a.bvh") and deep.fullmatch("x/y/A.BVH") and not deep.fullmatch("a.bvh.txt")
+    assert not glob_regex("*.bvh").fullmatch("x/a.bvh")
+    assert glob_regex("walk*/**/*.bvh").fullmatch("walks/a/b.bvh") and not glob_regex("walk*/**/*.bvh").fullmatch("run/a.bvh")
+    assert glob_regex("[ab]?.bvh").fullmatch("b1.bvh") and not glob_regex("[!ab]?.bvh").fullmatch("b1.bvh")
+    assert glob_regex("x[.bvh").fullmatch("x[.bvh")  # an unclosed bracket is itself
+
+
+def test_clips_are_found_sorted_with_loops_and_clashes_reported(tmp_path):
+    folder = mixed_folder(tmp_path)
+    shutil.copy(RUN, folder / "walks" / "run.BVH")  # the same outputs as run.bvh
+    clips, problems = find_clips(folder)
+    relative = [c.relative.as_posix() for c in clips]
+    assert relative == sorted(relative)
+    assert {"walks/slow/sit.BVH", "jumps/jump.bvh", "empty.bvh", "gone.bvh"} <= set(relative)
+    assert not any("again" in r for r in relative)  # the loop is not walked
+    reasons = {Path(p.input).name: p.error for p in problems}
+    assert "already walked" in reasons["again"]
+    # run.bvh and run.BVH would write the same files: the first in order is kept, the other reported.
+    assert "walks/run.BVH" in relative and "walks/run.bvh" not in relative
+    assert "would be those of" in reasons["run.bvh"] and "run.BVH" in reasons["run.bvh"]
+    # An output folder inside the input folder is not walked (its .bvh files are outputs).
+    (folder / "out").mkdir()
+    shutil.copy(RUN, folder / "out" / "old.bvh")
+    clips, _ = find_clips(folder, exclude=[folder / "out"])
+    assert not any(c.relative.parts[0] == "out" for c in clips)
+
+
+# ---------------------------------------------------------------------------- the command
+
+
+def test_a_mixed_folder_converts_the_good_lists_the_bad_and_exits_1(tmp_path):
+    folder = mixed_folder(tmp_path)
+    out = tmp_path / "out"
+    done = command("batch", folder, out, "-j", "2", "--json")
+    assert done.returncode == 1, done.stderr
+    assert "Traceback" not in done.stderr
+    assert files_under(out) == (expected_outputs("walks/run", "walks/slow/sit", "jumps/jump"))  # no stray file
+    for manifest in out.rglob("*.json"):
+        assert check_output_set(manifest) == []
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    by_name = {Path(line["input"]).name: line for line in lines}
+    for name in ("run.bvh", "sit.BVH", "jump.bvh"):
+        assert by_name[name]["status"] == "converted" and by_name[name]["frames"] > 0
+        assert set(by_name[name]["outputs"]) == {"bvh", "glb", "weights", "pipeline", "manifest"}
+    for name, says in (("empty.bvh", "empty"), ("picture.bvh", "not a BVH file"), ("broken.bvh", "broken.bvh:"),
+                       ("gone.bvh", "no such file")):
+        assert by_name[name]["status"] == "failed" and says in by_name[name]["error"], by_name[name]
+        assert f"failed: " in done.stderr and says in done.stderr
+    assert by_name["again"]["status"] == "skipped"
+    assert "converted       3" in done.stderr and "failed          4" in done.stderr
+
+
+def test_serial_and_pool_write_the_same_bytes(tmp_path):
+    folder = mixed_folder(tmp_path)
+    serial, pool = tmp_path / "serial", tmp_path / "pool"
+    assert command("batch", folder, serial, "-j", "1", "-q").returncode == 1
+    assert command("batch", folder, pool, "-j", "2", "-q").returncode == 1
+    assert files_under(serial) == files_under(pool)
+    for name in files_under(serial):
+        a, b = (serial / name).read_bytes(), (pool / name).read_bytes()
+        if name.endswith(".json"):  # manifests differ in their timings only
+            a, b = (json.loads(x) for x in (a, b))
+            a.pop("timings"), b.pop("timings")
+        assert a == b, name
+
+
+def test_every_option_reaches_every_file_and_glob_chooses(tmp_path):
+    folder = mixed_folder(tmp_path)
+    out = tmp_path / "out"
+    done = command("batch", folder, out, "--glob", "walks/**/*.bvh", "--no-glb", "--omega", "2", "--preset",
+                   "subtle", "-j", "1")
+    assert done.returncode == 0, done.stderr
+    assert files_under(out) == {f"{s}{x}" for s in ("walks/run", "walks/slow/sit")
+                                for x in (".bvh", ".pipeline.toml", ".json")}
+    info = json.loads((out / "walks" / "run.json").read_text())
+    assert info["preset"] == "subtle" and info["config"]["extrapolate"]["omega"] == 2.0
+
+
+def test_usage_mistakes_exit_2_in_one_line(tmp_path):
+    folder = mixed_folder(tmp_path)
+    for args, says in (
+        ((tmp_path / "nowhere", tmp_path / "o"), "no such folder"),
+        ((RUN, tmp_path / "o"), "is a file"),
+        ((folder, folder), "is the input folder"),
+        ((folder, tmp_path / "o", "--glob", "*.fbx"), "no file matches"),
+        ((folder, tmp_path / "o", "--sigma", "-1"), "sigma"),
+        ((folder, tmp_path / "o", "-j", "0"), "-j"),
+        ((folder, tmp_path / "o", "--units", "furlongs"), "furlongs"),
+    ):
+        done = command("batch", *args)
+        assert done.returncode == 2, (args, done.stderr)
+        assert says in done.stderr and "Traceback" not in done.stderr, (args, done.stderr)
+        assert not (tmp_path / "o").exists()
+
+
+def test_outputs_that_exist_fail_that_file_unless_overwrite_or_resume(tmp_path):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    shutil.copy(RUN, folder / "run.bvh")
+    out = tmp_path / "out"
+    assert command("batch", folder, out, "--no-glb", "-q").returncode == 0
+    again = command("batch", folder, out, "--no-glb")
+    assert again.returncode == 1 and "--overwrite" in again.stderr and "--resume" in again.stderr
+    assert command("batch", folder, out, "--no-glb", "--overwrite", "-q").returncode == 0
+
+
+# ---------------------------------------------------------------------------- resume
+
+
+def copies(root: Path, count: int) -> Path:
+    folder = root / "in"
+    folder.mkdir()
+    for k in range(count):
+        shutil.copy(JUMP, folder / f"clip{k:02d}.bvh")
+    return folder
+
+
+def stamps(out: Path) -> dict[str, int]:
+    return {p.name: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
+
+
+def test_resume_after_a_kill_redoes_only_what_did_not_finish(tmp_path):
+    folder = copies(tmp_path, 8)
+    out = tmp_path / "out"
+    process = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "-q", "batch", folder, out,
+                                "-j", "1"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while len(list(out.glob("*.json"))) < 2 and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.02)
+    process.send_signal(signal.SIGKILL)
+    process.wait(timeout=60)
+    finished = {m.stem for m in out.glob("*.json") if not check_output_set(m)}
+    assert 2 <= len(finished) < 8, "the kill should land mid-batch"
+    before = stamps(out)
+
+    done = command("batch", folder, out, "--resume", "-j", "2", "--json")
+    assert done.returncode == 0, done.stderr
+    statuses = {Path(json.loads(line)["input"]).stem: json.loads(line)["status"] for line in done.stdout.splitlines()}
+    assert {stem for stem, status in statuses.items() if status == "skipped"} == finished
+    after = stamps(out)
+    for stem in finished:  # not one byte of a finished clip rewritten
+        for suffix in SUFFIXES:
+            assert after[stem + suffix] == before[stem + suffix]
+    assert files_under(out) == expected_outputs(*(f"clip{k:02d}" for k in range(8)))  # no temporaries left
+    assert all(check_output_set(m) == [] for m in out.glob("*.json"))
+
+
+def test_resume_redoes_a_clip_whose_input_or_options_changed(tmp_path):
+    folder = copies(tmp_path, 2)
+    out = tmp_path / "out"
+    assert command("batch", folder, out, "--no-glb", "-q").returncode == 0
+
+    def statuses(*extra):
+        done = command("batch", folder, out, "--no-glb", "--resume", "--json", *extra)
+        assert done.returncode == 0, done.stderr
+        return {Path(json.loads(line)["input"]).stem: json.loads(line)["status"] for line in done.stdout.splitlines()}
+
+    assert statuses() == {"clip00": "skipped", "clip01": "skipped"}
+    shutil.copy(RUN, folder / "clip01.bvh")  # new bytes under the same name
+    assert statuses() == {"clip00": "skipped", "clip01": "converted"}
+    assert statuses("--omega", "3") == {"clip00": "converted", "clip01": "converted"}
+    (out / "clip00.pipeline.toml").write_text("tampered")
+    assert statuses("--omega", "3") == {"clip00": "converted", "clip01": "skipped"}
+
+
+def test_ctrl_c_lets_running_clips_finish_and_says_what_did_not_start(tmp_path):
+    folder = copies(tmp_path, 12)
+    out = tmp_path / "out"
+    process = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", folder, out, "-j", "2"],
+                               stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not list(out.glob("*.json")) and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.02)
+    os.killpg(process.pid, signal.SIGINT)  # what a terminal's Ctrl-C does: the whole group
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr
+    assert "Traceback" not in stderr and "not started" in stderr and "--resume" in stderr
+    names = files_under(out)
+    assert not any(name.endswith(".tmp") for name in names), names  # the clips in hand finished whole
+    for manifest in out.glob("*.json"):
+        assert check_output_set(manifest) == []
+    assert 1 <= len(list(out.glob("*.json"))) < 12
+
+
+# ---------------------------------------------------------------------------- the library
+
+
+def test_the_library_runs_a_batch_and_hears_of_each_file(tmp_path):
+    folder = mixed_folder(tmp_path)
+    clips, problems = find_clips(folder, "jumps/*.bvh")
+    assert [c.relative.as_posix() for c in clips] == ["jumps/jump.bvh"]
+    assert [Path(p.input).name for p in problems] == ["again"]  # the loop, met on the way
+    heard = []
+    results = run_batch(clips + [Clip(folder / "empty.bvh", Path("empty.bvh"))], tmp_path / "out",
+                        BatchOptions(load_preset("subtle"), glb=False), on_result=heard.append)
+    assert [r.status for r in results] == ["converted", "failed"] and heard == results
+    assert results[0].outputs["bvh"].endswith("jumps/jump.bvh") and results[1].error.endswith("file is empty")
+
+
+# ---------------------------------------------------------------------------- several files to exaggerate
+
+
+def test_exaggerate_takes_several_files_and_goes_on_past_a_bad_one(tmp_path):
+    bad = tmp_path / "bad.bvh"
+    bad.write_bytes(b"HIERARCHY\nROOT")
+    out = tmp_path / "out"
+    done = command("exaggerate", RUN, bad, JUMP, "-o", out, "--no-glb")
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert "bad.bvh" in done.stderr and "failed" in done.stderr
+    assert {p.name for p in out.iterdir()} == {f"{s}{x}" for s in (RUN.stem, JUMP.stem)
+                                              for x in (".bvh", ".pipeline.toml", ".json")}
+    good = command("exaggerate", RUN, JUMP, "-o", tmp_path / "two", "--no-glb")
+    assert good.returncode == 0, good.stderr
+
+
+@pytest.mark.parametrize("extra, says", [
+    (["-o", "-"], "standard output"),
+    (["-o", "OUT", "--name", "x"], "--name"),
+    (["-o", "OUT", "SAME"], "same outputs"),
+])
+def test_several_files_refuse_what_belongs_to_one(tmp_path, extra, says):
+    other = tmp_path / "x" / RUN.name
+    other.parent.mkdir()
+    shutil.copy(RUN, other)
+    args = [str(other) if a == "SAME" else str(tmp_path / "out") if a == "OUT" else a for a in extra]
+    done = command("exaggerate", RUN, JUMP, *args)
+    assert done.returncode == 2 and says in done.stderr and "Traceback" not in done.stderr, done.stderr
+    assert not (tmp_path / "out").exists()
+
+
+# ---------------------------------------------------------------------------- plan
+
+
+def test_plan_prints_one_command_per_clip_that_makes_what_batch_makes(tmp_path):
+    folder = mixed_folder(tmp_path)
+    options = ["--preset", "looney", "--weight", "left_leg=0.5", "--no-glb", "--sigma", "0.25s"]
+    planned = command("plan", folder, tmp_path / "farm", *options)
+    assert planned.returncode == 0, planned.stderr
+    lines = planned.stdout.splitlines()
+    assert len(lines) == len(find_clips(folder)[0])
+    assert not (tmp_path / "farm").exists()  # planning writes nothing
+    line = next(line for line in lines if "jump.bvh" in line)
+    words = shlex.split(line)
+    assert words[:2] == ["mocap-exaggerate", "exaggerate"] and "left_leg=0.5" in words and "0.25s" in words
+    ran = command(*words[1:])
+    assert ran.returncode == 0, ran.stderr
+    assert command("batch", folder, tmp_path / "batch", "--glob", "jumps/*", *options).returncode == 0
+    for suffix in (".bvh", ".pipeline.toml"):
+        assert ((tmp_path / "farm" / "jumps" / f"jump{suffix}").read_bytes()
+                == (tmp_path / "batch" / "jumps" / f"jump{suffix}").read_bytes())
