@@ -45,8 +45,8 @@ __all__ = ["Clip", "BatchOptions", "FileResult", "BatchInterrupted", "find_clips
 DEFAULT_GLOB = "**/*.bvh"
 
 #: Modules a worker imports once, before its first clip.
-_PRELOAD = ["mocap_exaggerate.job", "mocap_exaggerate.outputs", "mocap_exaggerate.io.gltf",
-            "mocap_exaggerate.body", "mocap_exaggerate.skinning"]
+_PRELOAD = ["mocap_exaggerate.job", "mocap_exaggerate.pipeline", "mocap_exaggerate.outputs",
+            "mocap_exaggerate.io.gltf", "mocap_exaggerate.body", "mocap_exaggerate.skinning", "manifold3d"]
 
 
 @dataclass(frozen=True)
@@ -358,11 +358,17 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
 
     import multiprocessing
 
-    context = multiprocessing.get_context("forkserver" if "forkserver" in multiprocessing.get_all_start_methods()
-                                          else "spawn")
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        # Workers fork from a server that has imported the pipeline once: each starts warm.
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(_PRELOAD)
+    else:
+        context = multiprocessing.get_context("spawn")
+    # The largest files first, so that no worker is left with a long one at the end while the others wait.
+    largest_first = sorted(clips, key=lambda clip: (-_size(clip.source), order[clip]))
     with _one_thread_per_worker():
         pool = ProcessPoolExecutor(max_workers=min(jobs, len(clips)), mp_context=context, initializer=_worker_start)
-        futures = {pool.submit(convert_file, clip, out_dir, options, parameters): clip for clip in clips}
+        futures = {pool.submit(convert_file, clip, out_dir, options, parameters): clip for clip in largest_first}
         try:
             for future in as_completed(futures):
                 clip = futures[future]
@@ -389,6 +395,13 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
             raise BatchInterrupted(_in_order(done, order), [c for c in clips if c not in done]) from None
         pool.shutdown(wait=True)
     return _in_order(done, order)
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
 
 
 def _in_order(done: dict[Clip, FileResult], order: dict[Clip, int]) -> list[FileResult]:

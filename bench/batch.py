@@ -1,0 +1,82 @@
+"""How fast does a whole folder convert, serially and in a pool of worker processes?
+
+Copies every shared clip (or the shipped samples, without ../shared) ``--copies``
+times into a folder, runs ``mocap-exaggerate batch`` on it as a user would (a new
+process, ``--json``), serially (``-j 1``) and with ``-j 2`` (or ``--jobs``), and
+prints files/s, frames/s, the speed-up, and the overhead: wall time a file costs
+beyond its own conversion (worker start-up and imports, handing work out, reporting),
+``(wall x workers - sum of per-file seconds) / files``.
+
+Not a test: run it by hand (``python bench/batch.py``) and quote the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from common import FPS, SHARED
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def clips() -> list[Path]:
+    shared = sorted(SHARED.glob("*.bvh")) if SHARED.is_dir() else []
+    # A clip whose header lies about its frame rate would need --fps of its own: left out.
+    shared = [p for p in shared if p.name not in FPS]
+    return shared or sorted((ROOT / "sample_data").glob("*.bvh"))
+
+
+def run(folder: Path, out: Path, jobs: int, extra: list[str]) -> tuple[float, list[dict]]:
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "-q", "batch", str(folder), str(out),
+                           "-j", str(jobs), "--json", *extra], capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    if done.returncode != 0:
+        sys.exit(f"batch -j {jobs} failed ({done.returncode}): {done.stderr.strip()}")
+    return wall, [json.loads(line) for line in done.stdout.splitlines()]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--copies", type=int, default=2, help="copies of each clip (default 2)")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--no-glb", action="store_true", help="BVH and manifest only")
+    args = parser.parse_args()
+    extra = ["--no-glb"] if args.no_glb else []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "in"
+        for k in range(args.copies):
+            (folder / f"copy{k}").mkdir(parents=True)
+            for clip in clips():
+                shutil.copy(clip, folder / f"copy{k}" / clip.name)
+        files = sum(1 for _ in folder.rglob("*.bvh"))
+        rows = []
+        for jobs in (1, args.jobs):
+            wall, results = run(folder, Path(tmp) / f"out{jobs}", jobs, extra)
+            frames = sum(r["frames"] or 0 for r in results)
+            inside = sum(r["seconds"] for r in results)
+            rows.append((jobs, wall, frames, inside))
+        print(f"{files} files ({args.copies} copies of {files // args.copies} clips), "
+              f"{'BVH only' if args.no_glb else 'BVH + GLB'}, on {Path(tmp)}\n")
+        print("| workers | wall (s) | files/s | frames/s | speed-up | overhead per file (s) |")
+        print("|---|---|---|---|---|---|")
+        serial = rows[0][1]
+        for jobs, wall, frames, inside in rows:
+            overhead = (wall * jobs - inside) / files
+            print(f"| {jobs} | {wall:.2f} | {files / wall:.2f} | {frames / wall:,.0f} | {serial / wall:.2f}x "
+                  f"| {overhead:.3f} |")
+        outs = [Path(tmp) / f"out{jobs}" for jobs, *_ in rows]
+        same = all((outs[0] / p.relative_to(outs[0])).read_bytes() == (outs[1] / p.relative_to(outs[0])).read_bytes()
+                   for p in outs[0].rglob("*") if p.is_file() and p.suffix != ".json")
+        print(f"\noutputs byte-identical serial vs pool (manifests aside, whose timings differ): {same}")
+
+
+if __name__ == "__main__":
+    main()
