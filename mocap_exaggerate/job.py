@@ -125,18 +125,22 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
     The manifest records it as ``parameters``; ``batch --resume`` redoes a clip
     whose manifest names other parameters.
     """
-    def content(thing):
-        if thing is None:
+    def skin_content(value) -> str | None:  # what the skin is, whichever file (or object) it came from
+        if value is None:
             return None
-        if isinstance(thing, Skin):
-            return file_digest([np.ascontiguousarray(a).tobytes() for a in (thing.vertices, thing.faces, thing.joints, thing.weights)]
-                               + ["\n".join(thing.joint_names).encode("utf-8")])
-        return file_digest(Path(thing).read_bytes())
+        if not isinstance(value, Skin):
+            from .io.skin import load_skin
+
+            value = load_skin(value)
+        arrays = [np.ascontiguousarray(a).tobytes() for a in (value.vertices, value.faces, value.joints, value.weights)]
+        names = json.dumps([list(value.joint_names), {k: np.asarray(v).tolist() for k, v in sorted(value.bind.items())}])
+        return file_digest(arrays + [names.encode("utf-8")])
 
     from . import __version__
 
     fields = {"version": __version__, "preset": preset, "config": config.to_dict(), "glb": bool(glb),
-              "units": units, "influences": int(influences), "skin": content(skin), "path_file": content(path_file)}
+              "units": units, "influences": int(influences), "skin": skin_content(skin),
+              "path_file": file_digest(Path(path_file).read_bytes()) if path_file is not None else None}
     return file_digest(json.dumps(fields, sort_keys=True, default=str).encode("utf-8"))
 
 
@@ -234,10 +238,10 @@ def convert(
     from .io.trails import read_trails
 
     paths = read_trails(path_file) if path_file is not None else None
-    parameters = parameters_digest(config, preset=preset, glb=glb, units=units, influences=influences, skin=skin,
-                                   path_file=path_file) if not to_stream else None
     if skin is not None:
         skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
+    parameters = parameters_digest(config, preset=preset, glb=glb, units=units, influences=influences, skin=skin,
+                                   path_file=path_file) if not to_stream else None
 
     timings: dict[str, float] = {}
     motion, report = read_bvh(data, name=label, fps=config.input.fps)

@@ -315,3 +315,34 @@ def test_plan_prints_one_command_per_clip_that_makes_what_batch_makes(tmp_path):
     for suffix in (".bvh", ".pipeline.toml"):
         assert ((tmp_path / "farm" / "jumps" / f"jump{suffix}").read_bytes()
                 == (tmp_path / "batch" / "jumps" / f"jump{suffix}").read_bytes())
+
+
+def test_resume_knows_a_skin_by_its_content(tmp_path):
+    """The skin is part of the parameters: the same skin keeps finished clips, another redoes them."""
+    import numpy as np
+
+    from mocap_exaggerate.body import default_skin
+    from mocap_exaggerate.io.bvh import read_bvh
+
+    folder = tmp_path / "in"
+    folder.mkdir()
+    shutil.copy(RUN, folder / "run.bvh")
+    body = default_skin(read_bvh(RUN)[0].skeleton)
+    skin = tmp_path / "skin.npz"
+
+    def save(weights):
+        np.savez(skin, vertices=body.vertices, faces=body.faces, joint_names=np.array(body.joint_names),
+                 joints=body.joints, weights=weights)
+
+    save(body.weights)
+    out = tmp_path / "out"
+    assert command("batch", folder, out, "--skin", skin, "-q").returncode == 0
+
+    def status():
+        done = command("batch", folder, out, "--skin", skin, "--resume", "--json")
+        assert done.returncode == 0, done.stderr
+        return json.loads(done.stdout)["status"]
+
+    assert status() == "skipped"
+    save(body.weights[:, ::-1].copy())  # other weights, same file name
+    assert status() == "converted"
