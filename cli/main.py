@@ -10,6 +10,7 @@ import functools
 import json
 import logging
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Any, Callable
@@ -94,6 +95,13 @@ def _parse_weights(ctx, param, values: tuple[str, ...]) -> tuple[tuple[str, floa
             raise click.BadParameter(f"{item!r}: weight must be between 0 and 10")
         out.append((key.strip(), weight))
     return tuple(out)
+
+
+def _folder_argument(ctx, param, value: str) -> Path:
+    """A folder argument as given: an empty one is a mistake, not the current folder."""
+    if not value.strip():
+        raise click.BadParameter("is empty (say . for the current folder)")
+    return Path(value)
 
 
 # ---------------------------------------------------------------------------- shared options
@@ -304,7 +312,7 @@ def cli() -> None:
 @cli.command()
 @click.argument("input_paths", metavar="IN.bvh...", nargs=-1, required=True,
                 type=click.Path(path_type=Path, allow_dash=True))
-@click.option("-o", "--output", "output", required=True, type=click.Path(path_type=Path, allow_dash=True),
+@click.option("-o", "--output", "output", required=True, callback=_folder_argument,
               help="Output folder (created if needed), or - to write the BVH to stdout.")
 @click.option("--name", default=None, help="Output file stem (default: the input's; 'stdin' for -).")
 @output_options
@@ -441,6 +449,8 @@ def _exaggerate_several(input_paths, output: Path, name, overwrite, skin_path, u
     for path in input_paths:
         other = stems.setdefault(path.stem.casefold(), path)
         if other is not path:
+            if os.path.realpath(other) == os.path.realpath(path):
+                raise UserError(f"{path} is given twice")
             raise UserError(f"{other} and {path} would write the same outputs in {output}; convert them apart "
                             f"(or use 'batch', which mirrors folders)")
     batch_options = _batch_options(options, overwrite=overwrite, resume=False, write_glb=write_glb,
@@ -452,8 +462,8 @@ def _exaggerate_several(input_paths, output: Path, name, overwrite, skin_path, u
 
 
 @cli.command()
-@click.argument("in_dir", metavar="IN_DIR", type=click.Path(path_type=Path))
-@click.argument("out_dir", metavar="OUT_DIR", type=click.Path(path_type=Path))
+@click.argument("in_dir", metavar="IN_DIR", callback=_folder_argument)
+@click.argument("out_dir", metavar="OUT_DIR", callback=_folder_argument)
 @click.option("--glob", "pattern", default=DEFAULT_GLOB, show_default=True,
               help="Which files under IN_DIR, by their path under it (case-insensitive; ** is any folders).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
@@ -483,7 +493,7 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
     """
     from mocap_exaggerate.batch import default_jobs, find_clips
 
-    in_dir, out_dir = _batch_folders(in_dir, out_dir)
+    in_dir, out_dir = _batch_folders(in_dir, out_dir, pattern)
     batch_options = _batch_options(options, overwrite=overwrite, resume=resume, write_glb=write_glb,
                                    skin_path=skin_path, units=units, influences=influences)
     clips, problems = find_clips(in_dir, pattern, exclude=[out_dir])
@@ -491,13 +501,16 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
         for problem in problems:
             log.warning("%s: %s", problem.input, problem.error)
         raise UserError(f"{in_dir}: no file matches {pattern!r} (see --glob)")
+    _writable(out_dir)
     code = _run_reported(clips, out_dir, batch_options, jobs=jobs or default_jobs(), as_json=as_json,
                          problems=problems)
     if code:
         click.get_current_context().exit(code)
 
 
-def _batch_folders(in_dir: Path, out_dir: Path) -> tuple[Path, Path]:
+def _batch_folders(in_dir: Path, out_dir: Path, pattern: str = DEFAULT_GLOB) -> tuple[Path, Path]:
+    from mocap_exaggerate.batch import find_clips
+
     if not in_dir.exists():
         raise UserError(f"{in_dir}: no such folder")
     if not in_dir.is_dir():
@@ -506,12 +519,29 @@ def _batch_folders(in_dir: Path, out_dir: Path) -> tuple[Path, Path]:
         raise UserError(f"{out_dir}: exists and is not a folder")
     if out_dir.resolve() == in_dir.resolve():
         raise UserError(f"{out_dir}: is the input folder; the outputs would sit among the clips")
+    if out_dir.is_dir() and out_dir.resolve().is_relative_to(in_dir.resolve()):
+        held, _ = find_clips(out_dir, pattern)  # this tool's own outputs do not count
+        if held:
+            raise UserError(f"{out_dir}: is inside {in_dir} and holds clips ({held[0].source}); outputs could "
+                            f"replace them: choose an output folder outside {in_dir}, or a new one")
     return in_dir, out_dir
 
 
+def _writable(folder: Path) -> None:
+    """Make ``folder`` and check a file can be written there, before any clip is worked on."""
+    import tempfile
+
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise UserError(f"{folder}: cannot write there ({error.strerror or error})") from None
+
+
 @cli.command()
-@click.argument("in_dir", metavar="IN_DIR", type=click.Path(path_type=Path))
-@click.argument("out_dir", metavar="OUT_DIR", type=click.Path(path_type=Path))
+@click.argument("in_dir", metavar="IN_DIR", callback=_folder_argument)
+@click.argument("out_dir", metavar="OUT_DIR", callback=_folder_argument)
 @click.option("--glob", "pattern", default=DEFAULT_GLOB, show_default=True,
               help="Which files under IN_DIR, by their path under it (case-insensitive; ** is any folders).")
 @output_options
@@ -535,7 +565,7 @@ def plan(in_dir: Path, out_dir: Path, pattern: str, overwrite: bool, skin_path: 
 
     from mocap_exaggerate.batch import find_clips
 
-    in_dir, out_dir = _batch_folders(in_dir, out_dir)
+    in_dir, out_dir = _batch_folders(in_dir, out_dir, pattern)
     _batch_options(options, overwrite=overwrite, resume=False, write_glb=write_glb, skin_path=skin_path,
                    units=units, influences=influences)  # a bad setting is refused here, not on the farm
     clips, problems = find_clips(in_dir, pattern, exclude=[out_dir])
@@ -545,8 +575,8 @@ def plan(in_dir: Path, out_dir: Path, pattern: str, overwrite: bool, skin_path: 
         raise UserError(f"{in_dir}: no file matches {pattern!r} (see --glob)")
     given = _given_options(click.get_current_context(), exclude={"pattern"})
     for clip in clips:
-        folder = (out_dir / clip.relative.parent).resolve()
-        words = ["mocap-exaggerate", "exaggerate", str(clip.source.resolve()), "-o", str(folder),
+        folder = (out_dir / clip.relative.parent).absolute()
+        words = ["mocap-exaggerate", "exaggerate", str(clip.source.absolute()), "-o", str(folder),
                  "--name", clip.name, *given]
         click.echo(shlex.join(words))
 

@@ -8,6 +8,7 @@ stdout. Only reporting lives here; the work is `mocap_exaggerate.batch`.
 
 from __future__ import annotations
 
+import logging
 import os
 import sys
 import time
@@ -17,11 +18,14 @@ import click
 
 from mocap_exaggerate.batch import FileResult
 
+log = logging.getLogger("mocap_exaggerate")
+
 
 def _terminal_width(stream: TextIO) -> int:
     """Columns of the terminal ``stream`` writes to; 0 when it is not one (a file, a pipe, a sizeless pty)."""
     try:
-        return os.get_terminal_size(stream.fileno()).columns if stream.isatty() else 0
+        size = os.get_terminal_size(stream.fileno()) if stream.isatty() else None
+        return size.columns if size is not None and size.lines > 0 else 0
     except (OSError, ValueError, AttributeError):
         return 0
 
@@ -56,6 +60,10 @@ class Progress:
             self.frames += result.frames or 0
         if self.as_json:
             click.echo(result.to_json())  # stdout: one line per file, for farm tooling
+        said = [f"warning: {result.input}: {w}" for w in result.warnings if log.isEnabledFor(logging.WARNING)]
+        said += [f"{result.input}: {n}" for n in result.notes if log.isEnabledFor(logging.INFO)]
+        for line in said:
+            (self.bar.write if self.bar is not None else click.echo)(line, file=self.stream)
         if self.bar is not None:
             if result.status == "failed":
                 self.bar.write(f"failed: {_said(result)}", file=self.stream)
@@ -63,9 +71,11 @@ class Progress:
             self.bar.set_postfix_str(f"{self.frames / elapsed:,.0f} frames/s", refresh=False)
             self.bar.update(1)
             return
+        if self.quiet:  # the summary lists the failures
+            return
         if result.status == "failed":
             click.echo(f"[{self.count}/{self.total}] failed: {_said(result)}", file=self.stream)
-        elif not self.quiet:
+        else:
             detail = (f"{result.frames} frames, max link stretch {result.max_link_stretch:.2f}x, {result.seconds:.2f} s"
                       if result.status == "converted" else result.error)
             click.echo(f"[{self.count}/{self.total}] {result.status} {result.input} ({detail})", file=self.stream)
@@ -95,7 +105,7 @@ def summary(results: list[FileResult], seconds: float, *, workers: int, pending:
     click.echo(f"  skipped    {counts['skipped']:>6}", file=stream)
     click.echo(f"  failed     {counts['failed']:>6}", file=stream)
     if pending:
-        click.echo(f"  not started{pending:>6}  (interrupted; run again with --resume to finish)", file=stream)
+        click.echo(f"  not done   {pending:>6}  (interrupted: run again with --resume to finish them)", file=stream)
     skipped = [r for r in results if r.status == "skipped" and r.error and "complete" not in r.error]
     for result in skipped:
         click.echo(f"skipped: {_said(result)}", file=stream)

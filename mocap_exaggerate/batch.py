@@ -27,7 +27,7 @@ import os
 import re
 import signal
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
@@ -88,7 +88,12 @@ class BatchOptions:
 
 @dataclass
 class FileResult:
-    """What happened to one file: ``converted``, ``skipped`` or ``failed`` (with ``error``)."""
+    """What happened to one file: ``converted``, ``skipped`` or ``failed`` (with ``error``).
+
+    warnings : what the reader noticed in the input (extra lines, a frame rate overridden)
+    notes : what the pipeline did worth hearing (rest frames, strikes found), and why
+        ``resume`` redid the clip
+    """
 
     input: str
     status: str
@@ -98,10 +103,11 @@ class FileResult:
     max_link_stretch: float | None = None
     error: str | None = None
     warnings: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     def to_json(self) -> str:
         """One line of JSON (``batch --json``)."""
-        return json.dumps(asdict(self), sort_keys=False)
+        return json.dumps({**asdict(self), "seconds": round(self.seconds, 4)})
 
 
 class BatchInterrupted(Exception):
@@ -208,7 +214,7 @@ def find_clips(folder: str | os.PathLike, pattern: str = DEFAULT_GLOB, *,
         for name in files:
             path = Path(here) / name
             relative = path.relative_to(top)
-            if regex.fullmatch(relative.as_posix()):
+            if regex.fullmatch(relative.as_posix()) and not is_output(path):
                 found.append(Clip(path, relative))
     found.sort(key=lambda clip: clip.relative.as_posix())
     clips, owners = [], {}
@@ -223,32 +229,74 @@ def find_clips(folder: str | os.PathLike, pattern: str = DEFAULT_GLOB, *,
     return clips, problems
 
 
+def is_output(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a BVH this tool wrote: the manifest beside it names it as its output.
+
+    A batch does not take its own (or an earlier run's) outputs for clips.
+    """
+    path = Path(path)
+    manifest = path.with_suffix(".json")
+    try:
+        if manifest.stat().st_size > 50_000_000:
+            return False
+        info = json.loads(manifest.read_text(encoding="utf-8"))
+        return info.get("tool") == "mocap_exaggerate" and info["outputs"]["bvh"] == path.name
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return False
+
+
+def clashes(clips: list[Clip], out_dir: str | os.PathLike) -> dict[Clip, str]:
+    """Clips whose outputs would land on another clip of the batch (an output folder that
+    overlaps the input folder): clip -> the clip it would replace."""
+    from .job import output_paths
+
+    sources = {os.path.realpath(clip.source): clip for clip in clips}
+    out = {}
+    for clip in clips:
+        for target in output_paths(Path(out_dir) / clip.relative.parent, clip.name).values():
+            other = sources.get(os.path.realpath(target))
+            if other is not None:
+                out[clip] = str(other.source)
+                break
+    return out
+
+
 # ---------------------------------------------------------------------------- one file
 
 
 def is_complete(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions, parameters: str | None = None) -> bool:
     """Whether ``clip``'s output set under ``out_dir`` is complete and was made from these input
     bytes with these parameters (`parameters_digest`; computed when not given)."""
+    return _not_complete(clip, out_dir, options, parameters) is None
+
+
+def _not_complete(clip: Clip, out_dir, options: BatchOptions, parameters: str | None) -> str | None:
+    """Why ``clip`` must be (re)done under ``out_dir``; None when its outputs can be kept."""
     from .job import check_output_set, parameters_digest
     from .outputs import file_digest
 
     manifest = Path(out_dir) / clip.relative.parent / f"{clip.name}.json"
-    if check_output_set(manifest):
-        return False
+    if not manifest.exists():
+        return "no outputs yet"
+    problems = check_output_set(manifest)
+    if problems:
+        return f"outputs incomplete ({problems[0]})"
     try:
         info = json.loads(manifest.read_text(encoding="utf-8"))
         recorded_input, recorded_parameters = info["input"]["hash"], info["parameters"]
     except (OSError, ValueError, KeyError, TypeError):
-        return False
+        return "a manifest from an older version"
     if parameters is None:
         parameters = parameters_digest(options.config, preset=options.preset, glb=options.glb, units=options.units,
                                        influences=options.influences, skin=options.skin)
     if recorded_parameters != parameters:
-        return False
+        return "made with other options"
     try:
-        return file_digest(clip.source.read_bytes()) == recorded_input
+        if file_digest(clip.source.read_bytes()) != recorded_input:
+            return "the input changed"
     except OSError:
-        return False
+        return "the input cannot be read"
+    return None
 
 
 def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
@@ -266,15 +314,18 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
     def failed(message: str) -> FileResult:
         return FileResult(label, "failed", seconds=time.perf_counter() - started, error=message)
 
+    redo = None
     try:
-        if options.resume and is_complete(clip, out_dir, options, parameters):
-            return FileResult(label, "skipped", seconds=time.perf_counter() - started,
-                              error="outputs complete, from the same input and parameters")
+        if options.resume:
+            redo = _not_complete(clip, out_dir, options, parameters)
+            if redo is None:
+                return FileResult(label, "skipped", seconds=time.perf_counter() - started,
+                                  error="outputs complete, from the same input and parameters")
         record = convert(clip.source, Path(out_dir) / clip.relative.parent, options.config, preset=options.preset,
                          name=clip.name, overwrite=options.overwrite or options.resume, glb=options.glb,
                          skin=options.skin, units=options.units, influences=options.influences)
     except OutputExistsError as error:
-        return failed(f"{error}; pass --overwrite to replace, or --resume to keep finished clips")
+        return failed(f"{error}; --overwrite replaces it (batch --resume keeps finished clips, redoes the rest)")
     except MocapError as error:
         return failed(str(error))
     except OSError as error:
@@ -286,20 +337,35 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
         return failed(f"internal error, please report it: {type(error).__name__}: {error}")
     return FileResult(label, "converted", outputs={kind: str(path) for kind, path in record.outputs.items()},
                       frames=record.frames, seconds=time.perf_counter() - started,
-                      max_link_stretch=round(record.max_link_stretch, 6),
-                      warnings=list(record.warnings) + list(record.notes))
+                      max_link_stretch=round(record.max_link_stretch, 6), warnings=list(record.warnings),
+                      notes=([f"redone: {redo}"] if redo and redo != "no outputs yet" else []) + list(record.notes))
 
 
 # ---------------------------------------------------------------------------- many files
 
 
-def _worker_start() -> None:
-    """In each worker: Ctrl-C is the parent's to handle (it lets running clips finish)."""
+def _worker_start(batch_pid: int) -> None:
+    """In each worker: Ctrl-C is the batch's to handle (it lets running clips finish), and the
+    worker ends itself when the batch process is gone (killed with SIGKILL, say), instead of
+    waiting for work forever and holding the batch's stdout open."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     import importlib
+    import threading
 
     for module in _PRELOAD:
         importlib.import_module(module)
+
+    def watch() -> None:
+        while True:
+            time.sleep(0.5)
+            try:
+                os.kill(batch_pid, 0)
+            except ProcessLookupError:
+                os._exit(1)
+            except PermissionError:  # alive, only not ours to signal
+                pass
+
+    threading.Thread(target=watch, name="batch-watch", daemon=True).start()
 
 
 @contextmanager
@@ -348,6 +414,11 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
         if on_result is not None:
             on_result(result)
 
+    for clip, other in clashes(clips, out_dir).items():  # never write over a clip of the batch
+        finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would replace the input {other}; "
+                                                                    "choose an output folder apart from the clips"))
+    clips = [clip for clip in clips if clip not in done]
+
     if jobs <= 1 or len(clips) <= 1:
         for clip in clips:
             try:
@@ -365,29 +436,41 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
     else:
         context = multiprocessing.get_context("spawn")
     # The largest files first, so that no worker is left with a long one at the end while the others wait.
-    largest_first = sorted(clips, key=lambda clip: (-_size(clip.source), order[clip]))
+    queue = sorted(clips, key=lambda clip: (-_size(clip.source), order[clip]))
+    queue.reverse()  # pop() from the end
+    workers = min(jobs, len(clips))
     with _one_thread_per_worker():
-        pool = ProcessPoolExecutor(max_workers=min(jobs, len(clips)), mp_context=context, initializer=_worker_start)
-        futures = {pool.submit(convert_file, clip, out_dir, options, parameters): clip for clip in largest_first}
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_worker_start,
+                                   initargs=(os.getpid(),))
+        running: dict = {}
+
+        def hand_out() -> None:  # one clip per worker at a time: Ctrl-C then has only those to wait for
+            while queue and len(running) < workers:
+                clip = queue.pop()
+                running[pool.submit(convert_file, clip, out_dir, options, parameters)] = clip
+
+        def collect(future) -> None:
+            clip = running.pop(future)
+            try:
+                result = future.result()
+            except BrokenProcessPool:
+                result = FileResult(str(clip.source), "failed", error="its worker process died (out of memory, or killed)")
+            finished(clip, result)
+
         try:
-            for future in as_completed(futures):
-                clip = futures[future]
-                try:
-                    result = future.result()
-                except BrokenProcessPool:
-                    result = FileResult(str(clip.source), "failed",
-                                        error="its worker process died (out of memory, or killed)")
-                finished(clip, result)
+            hand_out()
+            while running:
+                ready, _ = wait(list(running), return_when=FIRST_COMPLETED)
+                for future in ready:
+                    collect(future)
+                hand_out()
         except KeyboardInterrupt:
-            for future in futures:
-                future.cancel()
-            try:  # the clips being converted finish (the workers ignore Ctrl-C); a second Ctrl-C stops them too
-                for future, clip in futures.items():
-                    if not future.cancelled():
-                        try:
-                            finished(clip, future.result())
-                        except BrokenProcessPool:
-                            pass
+            queue.clear()
+            try:  # the clips in hand finish (the workers ignore Ctrl-C); a second Ctrl-C stops them
+                while running:
+                    ready, _ = wait(list(running), return_when=FIRST_COMPLETED)
+                    for future in ready:
+                        collect(future)
             except KeyboardInterrupt:
                 for process in list(getattr(pool, "_processes", {}).values()):
                     process.terminate()

@@ -110,7 +110,7 @@ def test_a_mixed_folder_converts_the_good_lists_the_bad_and_exits_1(tmp_path):
         assert by_name[name]["status"] == "converted" and by_name[name]["frames"] > 0
         assert set(by_name[name]["outputs"]) == {"bvh", "glb", "weights", "pipeline", "manifest"}
     for name, says in (("empty.bvh", "empty"), ("picture.bvh", "not a BVH file"), ("broken.bvh", "broken.bvh:"),
-                       ("gone.bvh", "no such file")):
+                       ("gone.bvh", "nowhere.bvh, which does not exist")):
         assert by_name[name]["status"] == "failed" and says in by_name[name]["error"], by_name[name]
         assert f"failed: " in done.stderr and says in done.stderr
     assert by_name["again"]["status"] == "skipped"
@@ -241,7 +241,8 @@ def test_ctrl_c_lets_running_clips_finish_and_says_what_did_not_start(tmp_path):
     os.killpg(process.pid, signal.SIGINT)  # what a terminal's Ctrl-C does: the whole group
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 130, stderr
-    assert "Traceback" not in stderr and "not started" in stderr and "--resume" in stderr
+    assert "Traceback" not in stderr and "not done" in stderr and "--resume" in stderr
+    assert stderr.count("] converted") == len(list(out.glob("*.json")))  # each file reported once
     names = files_under(out)
     assert not any(name.endswith(".tmp") for name in names), names  # the clips in hand finished whole
     for manifest in out.glob("*.json"):
@@ -346,3 +347,60 @@ def test_resume_knows_a_skin_by_its_content(tmp_path):
     assert status() == "skipped"
     save(body.weights[:, ::-1].copy())  # other weights, same file name
     assert status() == "converted"
+
+
+def test_an_output_folder_inside_the_input_folder_never_replaces_a_clip(tmp_path):
+    """batch lib lib/sub --overwrite once replaced lib/sub/run.bvh (a clip) by the output of lib/run.bvh."""
+    folder = tmp_path / "lib"
+    (folder / "sub").mkdir(parents=True)
+    shutil.copy(RUN, folder / "run.bvh")
+    shutil.copy(JUMP, folder / "sub" / "run.bvh")  # another clip, under the output's name
+    before = (folder / "sub" / "run.bvh").read_bytes()
+    for extra in ([], ["--overwrite"], ["--resume"]):
+        done = command("batch", folder, folder / "sub", "--no-glb", *extra)
+        assert done.returncode == 2 and "holds clips" in done.stderr, done.stderr
+    assert (folder / "sub" / "run.bvh").read_bytes() == before
+    # An output folder of our own inside the input folder is fine, run after run: its BVHs are
+    # known by the manifests beside them and not taken for clips.
+    for _ in range(2):
+        done = command("batch", folder, folder / "out", "--no-glb", "--overwrite", "--json")
+        assert done.returncode == 0, done.stderr
+        assert sorted(Path(json.loads(line)["input"]).relative_to(folder).as_posix()
+                      for line in done.stdout.splitlines()) == ["run.bvh", "sub/run.bvh"]
+    # The input folder inside the output folder: a clip whose outputs would land on another clip fails alone.
+    nested = tmp_path / "deep"
+    (nested / "a" / "a").mkdir(parents=True)
+    shutil.copy(RUN, nested / "a" / "x.bvh")
+    shutil.copy(JUMP, nested / "a" / "a" / "x.bvh")
+    kept = (nested / "a" / "x.bvh").read_bytes()
+    done = command("batch", nested / "a", nested, "--no-glb", "--overwrite")
+    assert done.returncode == 1 and "would replace the input" in done.stderr, done.stderr
+    assert (nested / "a" / "x.bvh").read_bytes() == kept
+
+
+def test_a_killed_batch_leaves_no_worker_behind(tmp_path):
+    folder = copies(tmp_path, 8)
+    out = tmp_path / "out"
+    process = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "-q", "batch", folder, out,
+                                "-j", "2"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                               start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not list(out.glob("*.json")) and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.02)
+    os.kill(process.pid, signal.SIGKILL)  # the batch alone, as a crash would
+    process.wait(timeout=60)
+    # The workers notice and end: whoever reads the batch's output (| tee log) sees its end.
+    start = time.monotonic()
+    assert process.stdout.read() == b""
+    assert time.monotonic() - start < 20
+
+
+def test_empty_and_unwritable_output_folders_are_refused_before_any_work(tmp_path):
+    folder = copies(tmp_path, 1)
+    for args in (["batch", folder, ""], ["exaggerate", RUN, "-o", ""]):
+        done = command(*args, cwd=tmp_path)
+        assert done.returncode == 2 and "is empty" in done.stderr, done.stderr
+    blocked = tmp_path / "file"
+    blocked.write_text("x")
+    done = command("batch", folder, blocked / "out")
+    assert done.returncode == 2 and "cannot write there" in done.stderr and "Traceback" not in done.stderr, done.stderr

@@ -208,6 +208,8 @@ def read_source(source, name: str | None = None) -> tuple[bytes, str]:
     except IsADirectoryError:
         raise InputError("is a folder, not a BVH file", source=label) from None
     except FileNotFoundError:
+        if path.is_symlink():
+            raise InputError(f"a link to {os.readlink(path)}, which does not exist", source=label) from None
         raise InputError("no such file", source=label) from None
     except PermissionError:
         raise InputError("permission denied", source=label) from None
