@@ -144,8 +144,6 @@ def clip_figures(path: Path, preset: str) -> dict:
     return figures
 
 
-
-
 def table(preset: str, rows: list[dict]) -> None:
     print(f"\n### {preset}\n")
     print("| clip | frames | skating captured | skating off | skating on | deepest off (h) | frames below off "

@@ -25,7 +25,6 @@ from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.quality import motion_quality
 
 
-
 def measure(path: Path, preset: str, config=None) -> dict:
     fps = FPS.get(path.name)
     config = config or load_preset(preset)
@@ -35,9 +34,6 @@ def measure(path: Path, preset: str, config=None) -> dict:
     seconds = time.perf_counter() - start
     return {"clip": path.name, "preset": preset, "frames": motion.num_frames, "seconds": seconds,
             "rest_frames": result.rest_frames, **motion_quality(motion, result)}
-
-
-
 
 
 def table(preset: str, rows: list[dict]) -> None:

@@ -64,20 +64,16 @@ def _keep_raw(ctx, param, values: tuple[str, ...]) -> None:
     ctx.meta.setdefault("mocap_exaggerate.raw", {})[param.name] = list(values)
 
 
-def _parse_stretches(ctx, param, values: tuple[str, ...]):
-    _keep_raw(ctx, param, values)
-    try:
-        return tuple(parse_stretch(v) for v in values)
-    except MocapError as error:
-        raise click.BadParameter(str(error)) from None
+def _parsed_each(parse: Callable[[str], Any]) -> Callable:
+    """A callback for a repeatable option: every value through ``parse``, a MocapError as click's BadParameter."""
+    def callback(ctx, param, values: tuple[str, ...]):
+        _keep_raw(ctx, param, values)
+        try:
+            return tuple(parse(v) for v in values)
+        except MocapError as error:
+            raise click.BadParameter(str(error)) from None
 
-
-def _parse_targets(ctx, param, values: tuple[str, ...]):
-    _keep_raw(ctx, param, values)
-    try:
-        return tuple(parse_target(v) for v in values)
-    except MocapError as error:
-        raise click.BadParameter(str(error)) from None
+    return callback
 
 
 def _parse_weights(ctx, param, values: tuple[str, ...]) -> tuple[tuple[str, float], ...]:
@@ -145,7 +141,7 @@ def pipeline_options(func: Callable) -> Callable:
         click.option("--springs/--no-springs", "springs_on", default=None, help="Switch the follow-through on or off."),
         click.option("--skeleton", "skeleton_mode", type=click.Choice(["sub", "original"]), default=None,
                      help="Write the rubber sub-joint skeleton (sub) or the original joints only (original)."),
-        click.option("--stretch", "stretches", multiple=True, callback=_parse_stretches, metavar="SPEC",
+        click.option("--stretch", "stretches", multiple=True, callback=_parsed_each(parse_stretch), metavar="SPEC",
                      help="Squash/stretch a limb along its path: LIMB:START-END:SCALE[:axes=xz][:pivot=end]"
                           "[:ease_in=0.6,0.2][:ease_out=0.3,0.8][:blend=1][:release=0.1s]; frames or 1.2s. "
                           "Repeatable; adds to the config's [[stretch]] list."),
@@ -159,7 +155,7 @@ def pipeline_options(func: Callable) -> Callable:
                           "when it landed (keeps the bigger stride)."),
         click.option("--floor/--no-floor", "floor_on", default=None,
                      help="Keep every joint above the captured floor (with --contacts auto)."),
-        click.option("--target", "targets", multiple=True, callback=_parse_targets, metavar="JOINT@FRAME[=X,Y,Z]",
+        click.option("--target", "targets", multiple=True, callback=_parsed_each(parse_target), metavar="JOINT@FRAME[=X,Y,Z]",
                      help="Hold an end effector (a joint, or a limb: right_arm) where it was captured at FRAME "
                           "(or at X,Y,Z), eased in and out over 0.25 s. Frames or 1.2s. Repeatable."),
         click.option("--tpose", type=click.Choice(["auto", "keep", "drop"]), default=None,
@@ -466,8 +462,8 @@ def _exaggerate_several(input_paths, output: Path, name, overwrite, skin_path, u
 @click.argument("out_dir", metavar="OUT_DIR", callback=_folder_argument)
 @click.option("--glob", "pattern", default=DEFAULT_GLOB, show_default=True,
               help="Which files under IN_DIR, by their path under it (case-insensitive; ** is any folders).")
-@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
-              help="Worker processes (default: one per core).")
+@click.option("-j", "--jobs", type=click.IntRange(1, 512), default=None,
+              help="Worker processes, 1 to 512 (default: one per core).")
 @click.option("--resume", is_flag=True,
               help="Keep clips whose outputs are complete and made from the same input and options; redo the rest.")
 @click.option("--json", "as_json", is_flag=True,
@@ -498,9 +494,9 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
                                    skin_path=skin_path, units=units, influences=influences)
     clips, problems = find_clips(in_dir, pattern, exclude=[out_dir])
     if not clips:
-        for problem in problems:
-            log.warning("%s: %s", problem.input, problem.error)
-        raise UserError(f"{in_dir}: no file matches {pattern!r} (see --glob)")
+        for problem in problems:  # -v: what was met on the way; the error is that nothing matched
+            log.info("%s: %s", problem.input, problem.error)
+        raise UserError(f"{in_dir}: no file matches {_shown(pattern)} (see --glob)")
     _writable(out_dir)
     code = _run_reported(clips, out_dir, batch_options, jobs=jobs or default_jobs(), as_json=as_json,
                          problems=problems)
@@ -525,6 +521,11 @@ def _batch_folders(in_dir: Path, out_dir: Path, pattern: str = DEFAULT_GLOB) -> 
             raise UserError(f"{out_dir}: is inside {in_dir} and holds clips ({held[0].source}); outputs could "
                             f"replace them: choose an output folder outside {in_dir}, or a new one")
     return in_dir, out_dir
+
+
+def _shown(text: str, most: int = 80) -> str:
+    """``text`` quoted for a message, cut short when it is long."""
+    return repr(text) if len(text) <= most else repr(text[:most]) + f"... ({len(text)} characters)"
 
 
 def _writable(folder: Path) -> None:
@@ -572,7 +573,7 @@ def plan(in_dir: Path, out_dir: Path, pattern: str, overwrite: bool, skin_path: 
     for problem in problems:
         log.warning("%s: %s", problem.input, problem.error)
     if not clips:
-        raise UserError(f"{in_dir}: no file matches {pattern!r} (see --glob)")
+        raise UserError(f"{in_dir}: no file matches {_shown(pattern)} (see --glob)")
     given = _given_options(click.get_current_context(), exclude={"pattern"})
     for clip in clips:
         folder = (out_dir / clip.relative.parent).absolute()

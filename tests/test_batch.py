@@ -152,11 +152,15 @@ def test_usage_mistakes_exit_2_in_one_line(tmp_path):
         ((folder, tmp_path / "o", "--glob", "*.fbx"), "no file matches"),
         ((folder, tmp_path / "o", "--sigma", "-1"), "sigma"),
         ((folder, tmp_path / "o", "-j", "0"), "-j"),
+        ((folder, tmp_path / "o", "-j", "99999999999999999999"), "-j"),
+        ((folder, tmp_path / "o", "--glob", "a" * 5000), "5000 characters"),
+        ((folder, tmp_path / "o", "--glob", "["), "no file matches"),
         ((folder, tmp_path / "o", "--units", "furlongs"), "furlongs"),
     ):
         done = command("batch", *args)
         assert done.returncode == 2, (args, done.stderr)
         assert says in done.stderr and "Traceback" not in done.stderr, (args, done.stderr)
+        assert len(done.stderr.splitlines()) == 1 and len(done.stderr) < 400, done.stderr
         assert not (tmp_path / "o").exists()
 
 
