@@ -32,7 +32,7 @@ from .stages.orient import incoming_joint, motion_from_world, recover_orientatio
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping, strike_scale
 from .stages.subjoints import (SubjointConfig, SubjointHierarchy, build_hierarchy, minor_branches, position_subjoints,
-                               rubber_groups)
+                               riders, rubber_groups)
 from .tpose import detect_rest_frames
 
 __all__ = [
@@ -277,7 +277,7 @@ def _springs(state: State, config) -> State:
         joints = moving[:, original]
         bent = keep_bends(joints, state.captured_pos[state.first:], hinges)
         for hinge in hinges:
-            base, middle, end = hinge[:3]
+            _, middle, end = hinge[:3]
             shift = bent[:, middle] - joints[:, middle]
             if not shift.any():
                 continue
@@ -517,26 +517,18 @@ def max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.nda
 def limb_hinges(skeleton: Skeleton, limbs: dict) -> list[tuple[int, ...]]:
     """(base, middle, end) of every arm and leg, and for a leg its longest toe after them."""
     hinges = []
+    lengths = skeleton.link_lengths()
     for name, limb in limbs.items():
         if name.endswith(("_arm", "_leg")) and len(limb.joints) >= 3:
             toes = [int(c) for c in skeleton.children(limb.joints[2])] if name.endswith("_leg") else []
-            reach = [skeleton.link_lengths()[c] for c in toes]
+            reach = [lengths[c] for c in toes]
             hinges.append(tuple(limb.joints[:3]) + ((toes[int(np.argmax(reach))],) if toes and max(reach) > 0 else ()))
     return hinges
 
 
 def rider_joints(skeleton: Skeleton) -> dict[int, list[int]]:
-    """Joint -> the joints of minor branches riding rigidly on it (toes on a foot, fingers on a hand).
-
-    """
-    rigid = minor_branches(skeleton)
-    out: dict[int, list[int]] = {}
-    for j in np.flatnonzero(rigid):
-        p = int(skeleton.parents[j])
-        while rigid[p]:
-            p = int(skeleton.parents[p])
-        out.setdefault(p, []).append(int(j))
-    return out
+    """Joint -> the joints of minor branches riding rigidly on it (toes on a foot, fingers on a hand)."""
+    return riders(skeleton, minor_branches(skeleton))
 
 
 def torso_joints(skeleton: Skeleton, limbs: dict) -> np.ndarray:

@@ -209,3 +209,17 @@ def test_time_on_another_axis_and_zero_weights_in_the_torso(sample_clip):
     assert np.allclose(across.swapaxes(0, 1), along)
     # A weight of 0 keeps a joint as captured, in the torso too.
     assert np.array_equal(along[:, [4, 7]], world[:, [4, 7]])
+
+
+@pytest.mark.parametrize("make", [
+    lambda v: __import__("mocap_exaggerate.stages.correct", fromlist=["x"]).CorrectConfig(smooth=v),
+    lambda v: __import__("mocap_exaggerate.stages.contacts", fromlist=["x"]).ContactConfig(blend=v),
+    lambda v: __import__("mocap_exaggerate.stages.contacts", fromlist=["x"]).TargetSpec(joint="rFoot", frame=10, window=v),
+])
+def test_time_settings_longer_than_10_s_are_refused_in_seconds_and_in_frames(make):
+    """They once let through up to 10,000 s (the frame cap applied to seconds)."""
+    for fine in ("9s", "500ms", "5000f", 2.0):
+        make(fine)
+    for absurd in ("3600s", "11s", "20000f", 3600.0):
+        with pytest.raises(ConfigError, match="at most 10 s"):
+            make(absurd)

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ConfigError, check_flag, check_number
-from .extrapolate import parse_duration, smootherstep, spread_max
+from .extrapolate import check_duration, smootherstep, spread_max
 
 __all__ = ["CorrectConfig", "CorrectReport", "accent_stretch", "correct", "keep_bends", "stretch_error"]
 
@@ -87,8 +87,7 @@ class CorrectConfig:
         check_flag("correct.enabled", self.enabled)
         check_number("correct.torso", self.torso, 0, 1)
         check_number("correct.accent_speed", self.accent_speed, 0, 100)
-        if parse_duration(self.smooth, 1.0, what="correct.smooth") > 10 * 1000:
-            raise ConfigError(f"correct.smooth must be at most 10 s, got {self.smooth!r}")
+        check_duration(self.smooth, "correct.smooth")
         check_number("correct.threshold", self.threshold, 0, 10)
         check_number("correct.delta", self.delta, 0, 1, low_open=True)
         check_number("correct.max_stretch", self.max_stretch, 1, 10)
@@ -250,7 +249,6 @@ def correct(
     if float(np.sum(rest_lengths[1:])) <= 0:
         return out, CorrectReport(0, 0, 0.0, 0.0, 0)  # no link to over-stretch
     total = _total_length(rest_lengths)
-    num_joints = len(parents)
     x, vec, length = _excess(world_pos, parents, rest_lengths, max_stretch)
     errors = x.sum(axis=1) / total
     active = np.flatnonzero(errors > threshold)

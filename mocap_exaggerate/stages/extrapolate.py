@@ -71,6 +71,22 @@ def parse_duration(value: str | float | int, frame_time: float, *, what: str = "
     return number
 
 
+def check_duration(value: str | float | int, what: str, most_seconds: float = 10.0) -> None:
+    """Refuse a duration setting longer than ``most_seconds`` (in frames: 1,000 a second, the
+    highest frame rate read), before any clip says what a frame is.
+
+    >>> check_duration("3600s", "correct.smooth")
+    Traceback (most recent call last):
+    mocap_exaggerate.errors.ConfigError: correct.smooth must be at most 10 s (or 10000 frames), got '3600s'
+    """
+    amount = parse_duration(value, 1.0, what=what)  # seconds, or frames for "18f"
+    match = _DURATION.match(str(value)) if isinstance(value, str) else None
+    in_frames = match is not None and (match.group(2) or "s").startswith("f")
+    if amount > most_seconds * (1000.0 if in_frames else 1.0):
+        raise ConfigError(f"{what} must be at most {most_seconds:g} s (or {most_seconds * 1000:g} frames), "
+                          f"got {value!r}")
+
+
 def parse_frame(value: str | float | int, frame_time: float, *, what: str) -> int:
     """A frame index from a frame number (``120``, ``"120"``) or a time (``"1.2s"``, ``"800ms"``, ``"96f"``).
 
@@ -310,16 +326,26 @@ def _limit_speed(deviation: np.ndarray, budget: np.ndarray, radius: int) -> np.n
         over = step > budget * (1.0 - 1e-9)
         if not over.any():
             return out
-        need = np.ones(step.shape[0] + 1, dtype=np.float64)[:, None].repeat(step.shape[1], axis=1)
-        share = np.where(over, budget / np.maximum(step, 1e-300), 1.0) * 0.98  # a step joins two frames: both
-        need[:-1] = np.minimum(need[:-1], share)
-        need[1:] = np.minimum(need[1:], share)
-        out = out * (1.0 - spread_max(1.0 - need, radius))[..., None]
+        share = np.where(over, budget / np.maximum(step, 1e-300), 1.0) * 0.98
+        out = out * step_gain(share, radius)[..., None]
     # Still over after the passes (a gain changing fast where the deviation is large: a sigma of
     # a few frames): scale those joints' whole deviation down, which scales every step alike.
     step = np.linalg.norm(np.diff(out, axis=0), axis=-1).max(axis=0)
     scale = np.where(step > budget, budget / np.maximum(step, 1e-300), 1.0)
     return out * scale[:, None]
+
+
+def step_gain(share: np.ndarray, radius: int) -> np.ndarray:
+    """Gains per frame ``(F, ...)`` from the share ``(F-1, ...)`` each one-frame step may keep.
+
+    A step joins two frames: both take its share (the smaller of two), then
+    the shortfall is spread over ``radius`` frames by `spread_max`, so a gain
+    eases in and out and is never above what any frame needs.
+    """
+    need = np.ones((share.shape[0] + 1,) + share.shape[1:])
+    need[:-1] = np.minimum(need[:-1], share)
+    need[1:] = np.minimum(need[1:], share)
+    return 1.0 - spread_max(1.0 - need, radius)
 
 
 def spread_max(values: np.ndarray, radius: int) -> np.ndarray:

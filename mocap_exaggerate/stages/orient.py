@@ -22,10 +22,10 @@ import numpy as np
 
 from ..kinematics import frame_blocks, local_from_world
 from ..motion import Motion
-from ..rotations import (cross, quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow,
+from ..rotations import (quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow,
                          quat_rotate, quat_slerp, quat_unroll)
-from .extrapolate import spread_max
-from .subjoints import SubjointHierarchy
+from .extrapolate import step_gain
+from .subjoints import SubjointHierarchy, riders
 
 __all__ = ["recover_orientations", "motion_from_world", "incoming_joint"]
 
@@ -207,16 +207,11 @@ def _calm_riders(world, new_pos, source_rot, source_pos, skeleton, rigid, max_sp
     again. The parent's position is never moved; where its own move uses the
     budget up, the turn goes as far as back to the captured orientation.
     """
-    for p in range(skeleton.num_joints):
-        if rigid[p]:
-            continue
-        riders = [int(j) for j in skeleton.descendants(p)[1:] if rigid[j]]
-        if not riders:
-            continue
-        budget = max_speed * np.linalg.norm(np.diff(source_pos[:, riders], axis=0), axis=-1).max(axis=0)
+    for p, below in riders(skeleton, rigid).items():
+        budget = max_speed * np.linalg.norm(np.diff(source_pos[:, below], axis=0), axis=-1).max(axis=0)
         turn = quat_mul(world[:, p], quat_inv(source_rot[:, p]))
         turn = turn * np.where(turn[:, 3:] < 0, -1.0, 1.0)  # the shorter way: D^0 = 1, D^1 = D
-        offsets = source_pos[:, riders] - source_pos[:, p : p + 1]
+        offsets = source_pos[:, below] - source_pos[:, p : p + 1]
         gain = np.ones(len(turn))
         for _ in range(_RIDER_PASSES):
             placed = quat_rotate(quat_pow(turn, gain)[:, None], offsets) + new_pos[:, p : p + 1]
@@ -224,10 +219,7 @@ def _calm_riders(world, new_pos, source_rot, source_pos, skeleton, rigid, max_sp
             share = np.min(np.where(step > budget, budget / np.maximum(step, 1e-300), 1.0), axis=1) * 0.98
             if share.min() >= 0.98:
                 break
-            need = np.ones(len(turn))
-            need[:-1] = np.minimum(need[:-1], share)
-            need[1:] = np.minimum(need[1:], share)
-            gain = gain * (1.0 - spread_max(1.0 - need, radius))
+            gain = gain * step_gain(share, radius)
         if gain.min() < 1.0:
             world[:, p] = quat_normalize(quat_mul(quat_pow(turn, gain), source_rot[:, p]))
 

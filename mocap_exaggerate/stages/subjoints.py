@@ -189,6 +189,18 @@ def _reach(skeleton: Skeleton) -> np.ndarray:
     return reach
 
 
+def riders(skeleton: Skeleton, rigid: np.ndarray) -> dict[int, list[int]]:
+    """Joint -> the rigid joints riding on it: those whose nearest non-rigid ancestor it is
+    (toes on a foot, fingers on a hand; a hip has none, though toes hang far below it)."""
+    out: dict[int, list[int]] = {}
+    for j in np.flatnonzero(rigid):
+        p = int(skeleton.parents[j])
+        while p > 0 and rigid[p]:
+            p = int(skeleton.parents[p])
+        out.setdefault(p, []).append(int(j))
+    return out
+
+
 def rubber_groups(skeleton: Skeleton, rigid: np.ndarray) -> tuple[tuple[int, ...], ...]:
     """Chains of original joints that bend as one rubber hose.
 
