@@ -21,9 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from common import FPS, SHARED
-
-ROOT = Path(__file__).resolve().parent.parent
+from common import FPS, ROOT, SHARED
 
 
 def clips() -> list[Path]:

@@ -89,8 +89,6 @@ def clip_figures(path: Path, preset: str) -> dict:
     fps = FPS.get(path.name)
     config = load_preset(preset)
     motion = load_bvh(path, fps=fps)
-    if fps is not None:  # run() does not read input.fps (convert's reader does); kept so the config says it
-        config = dataclasses.replace(config, input=dataclasses.replace(config.input, fps=fps))
     configs = {"off": config}
     if hasattr(config, "contacts"):
         configs = {"on": config, "off": dataclasses.replace(

@@ -430,7 +430,7 @@ def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bo
 
 def _exaggerate_several(input_paths, output: Path, name, overwrite, skin_path, units, influences, write_glb,
                         trails_path, path_file, options) -> None:
-    from mocap_exaggerate.batch import Clip
+    from mocap_exaggerate.batch import Clip, same_outputs
 
     if any(str(p) == "-" for p in input_paths):
         raise UserError("'-' (standard input) can only be the one input")
@@ -441,27 +441,43 @@ def _exaggerate_several(input_paths, output: Path, name, overwrite, skin_path, u
             raise UserError(f"{flag} belongs to one clip; give one input with it")
     if output.exists() and not output.is_dir():
         raise UserError(f"{output}: exists and is not a folder")
-    stems: dict[str, Path] = {}
-    for path in input_paths:
-        other = stems.setdefault(path.stem.casefold(), path)
-        if other is not path:
-            if os.path.realpath(other) == os.path.realpath(path):
-                raise UserError(f"{path} is given twice")
-            raise UserError(f"{other} and {path} would write the same outputs in {output}; convert them apart "
-                            f"(or use 'batch', which mirrors folders)")
+    clips = [Clip(path, Path(path.name)) for path in input_paths]
+    for clip, other in same_outputs(clips).items():
+        if os.path.realpath(other.source) == os.path.realpath(clip.source):
+            raise UserError(f"{clip.source} is given twice")
+        raise UserError(f"{other.source} and {clip.source} would write the same outputs in {output}; convert them "
+                        f"apart (or use 'batch', which mirrors folders)")
     batch_options = _batch_options(options, overwrite=overwrite, resume=False, write_glb=write_glb,
                                    skin_path=skin_path, units=units, influences=influences)
-    clips = [Clip(path, Path(path.name)) for path in input_paths]
     code = _run_reported(clips, output, batch_options, jobs=1, as_json=False)
     if code:
         click.get_current_context().exit(code)
 
 
+def folder_arguments(func: Callable) -> Callable:
+    """IN_DIR, OUT_DIR and --glob, shared by ``batch`` and ``plan``."""
+    func = click.option("--glob", "pattern", default=DEFAULT_GLOB, show_default=True,
+                        help="Which files under IN_DIR, by their path under it (case-insensitive; ** is any "
+                             "folders).")(func)
+    func = click.argument("out_dir", metavar="OUT_DIR", callback=_folder_argument)(func)
+    return click.argument("in_dir", metavar="IN_DIR", callback=_folder_argument)(func)
+
+
+def _find_batch_clips(in_dir: Path, out_dir: Path, pattern: str):
+    """The clips a batch or plan takes, and what was met on the way; a usage error when none match."""
+    from mocap_exaggerate.batch import check_folders, find_clips
+
+    check_folders(in_dir, out_dir, pattern)
+    clips, problems = find_clips(in_dir, pattern, exclude=[out_dir])
+    if not clips:
+        for problem in problems:  # -v: what was met on the way; the error is that nothing matched
+            log.info("%s: %s", problem.input, problem.error)
+        raise UserError(f"{in_dir}: no file matches {_shown(pattern)} (see --glob)")
+    return clips, problems
+
+
 @cli.command()
-@click.argument("in_dir", metavar="IN_DIR", callback=_folder_argument)
-@click.argument("out_dir", metavar="OUT_DIR", callback=_folder_argument)
-@click.option("--glob", "pattern", default=DEFAULT_GLOB, show_default=True,
-              help="Which files under IN_DIR, by their path under it (case-insensitive; ** is any folders).")
+@folder_arguments
 @click.option("-j", "--jobs", type=click.IntRange(1, 512), default=None,
               help="Worker processes, 1 to 512 (default: one per core).")
 @click.option("--resume", is_flag=True,
@@ -487,40 +503,16 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
       mocap-exaggerate batch mocap/ out/ --resume --json > results.jsonl
       mocap-exaggerate batch mocap/ out/ --glob 'walk*/**/*.bvh' --no-glb
     """
-    from mocap_exaggerate.batch import default_jobs, find_clips
+    from mocap_exaggerate.batch import default_jobs
 
-    in_dir, out_dir = _batch_folders(in_dir, out_dir, pattern)
     batch_options = _batch_options(options, overwrite=overwrite, resume=resume, write_glb=write_glb,
                                    skin_path=skin_path, units=units, influences=influences)
-    clips, problems = find_clips(in_dir, pattern, exclude=[out_dir])
-    if not clips:
-        for problem in problems:  # -v: what was met on the way; the error is that nothing matched
-            log.info("%s: %s", problem.input, problem.error)
-        raise UserError(f"{in_dir}: no file matches {_shown(pattern)} (see --glob)")
+    clips, problems = _find_batch_clips(in_dir, out_dir, pattern)
     _writable(out_dir)
     code = _run_reported(clips, out_dir, batch_options, jobs=jobs or default_jobs(), as_json=as_json,
                          problems=problems)
     if code:
         click.get_current_context().exit(code)
-
-
-def _batch_folders(in_dir: Path, out_dir: Path, pattern: str = DEFAULT_GLOB) -> tuple[Path, Path]:
-    from mocap_exaggerate.batch import find_clips
-
-    if not in_dir.exists():
-        raise UserError(f"{in_dir}: no such folder")
-    if not in_dir.is_dir():
-        raise UserError(f"{in_dir}: is a file; give the folder it is in (or use 'exaggerate' for files)")
-    if out_dir.exists() and not out_dir.is_dir():
-        raise UserError(f"{out_dir}: exists and is not a folder")
-    if out_dir.resolve() == in_dir.resolve():
-        raise UserError(f"{out_dir}: is the input folder; the outputs would sit among the clips")
-    if out_dir.is_dir() and out_dir.resolve().is_relative_to(in_dir.resolve()):
-        held, _ = find_clips(out_dir, pattern)  # this tool's own outputs do not count
-        if held:
-            raise UserError(f"{out_dir}: is inside {in_dir} and holds clips ({held[0].source}); outputs could "
-                            f"replace them: choose an output folder outside {in_dir}, or a new one")
-    return in_dir, out_dir
 
 
 def _shown(text: str, most: int = 80) -> str:
@@ -541,10 +533,7 @@ def _writable(folder: Path) -> None:
 
 
 @cli.command()
-@click.argument("in_dir", metavar="IN_DIR", callback=_folder_argument)
-@click.argument("out_dir", metavar="OUT_DIR", callback=_folder_argument)
-@click.option("--glob", "pattern", default=DEFAULT_GLOB, show_default=True,
-              help="Which files under IN_DIR, by their path under it (case-insensitive; ** is any folders).")
+@folder_arguments
 @output_options
 @pipeline_options
 @verbosity_options
@@ -564,16 +553,11 @@ def plan(in_dir: Path, out_dir: Path, pattern: str, overwrite: bool, skin_path: 
     """
     import shlex
 
-    from mocap_exaggerate.batch import find_clips
-
-    in_dir, out_dir = _batch_folders(in_dir, out_dir, pattern)
     _batch_options(options, overwrite=overwrite, resume=False, write_glb=write_glb, skin_path=skin_path,
                    units=units, influences=influences)  # a bad setting is refused here, not on the farm
-    clips, problems = find_clips(in_dir, pattern, exclude=[out_dir])
+    clips, problems = _find_batch_clips(in_dir, out_dir, pattern)
     for problem in problems:
         log.warning("%s: %s", problem.input, problem.error)
-    if not clips:
-        raise UserError(f"{in_dir}: no file matches {_shown(pattern)} (see --glob)")
     given = _given_options(click.get_current_context(), exclude={"pattern"})
     for clip in clips:
         folder = (out_dir / clip.relative.parent).absolute()

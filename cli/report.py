@@ -40,8 +40,8 @@ class Progress:
     """Called with each `FileResult` as it finishes."""
 
     def __init__(self, total: int, *, quiet: bool = False, as_json: bool = False, stream: TextIO | None = None,
-                 bar: bool | None = None, verb: str = "converted") -> None:
-        self.total, self.quiet, self.as_json, self.verb = total, quiet, as_json, verb
+                 bar: bool | None = None) -> None:
+        self.total, self.quiet, self.as_json = total, quiet, as_json
         self.stream = stream or sys.stderr
         self.count = 0
         self.frames = 0

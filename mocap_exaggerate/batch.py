@@ -35,11 +35,11 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from .config import PipelineConfig
-from .errors import MocapError
+from .errors import ConfigError, MocapError
 from .io.files import OutputExistsError
 
 __all__ = ["Clip", "BatchOptions", "FileResult", "BatchInterrupted", "find_clips", "glob_regex", "convert_file",
-           "run_batch", "is_complete", "DEFAULT_GLOB"]
+           "run_batch", "is_complete", "is_output", "same_outputs", "check_folders", "DEFAULT_GLOB"]
 
 #: Which files a batch takes: every .bvh at any depth (matched without regard to case).
 DEFAULT_GLOB = "**/*.bvh"
@@ -217,16 +217,58 @@ def find_clips(folder: str | os.PathLike, pattern: str = DEFAULT_GLOB, *,
             if regex.fullmatch(relative.as_posix()) and not is_output(path):
                 found.append(Clip(path, relative))
     found.sort(key=lambda clip: clip.relative.as_posix())
-    clips, owners = [], {}
-    for clip in found:
+    taken = same_outputs(found)
+    problems += [FileResult(str(clip.source), "failed", error=f"its outputs would be those of {other.source}; rename one")
+                 for clip, other in taken.items()]
+    return [clip for clip in found if clip not in taken], problems
+
+
+def same_outputs(clips: list[Clip]) -> dict[Clip, Clip]:
+    """Clips whose outputs would be the files of an earlier clip in the list (``a.bvh`` and
+    ``a.BVH``, or one file given twice): clip -> that earlier clip."""
+    owners: dict[tuple[str, str], Clip] = {}
+    out = {}
+    for clip in clips:
         key = (clip.relative.parent.as_posix().casefold(), clip.name.casefold())
         if key in owners:
-            problems.append(FileResult(str(clip.source), "failed",
-                                       error=f"its outputs would be those of {owners[key].source}; rename one"))
-            continue
-        owners[key] = clip
-        clips.append(clip)
-    return clips, problems
+            out[clip] = owners[key]
+        else:
+            owners[key] = clip
+    return out
+
+
+def check_folders(in_dir: str | os.PathLike, out_dir: str | os.PathLike, pattern: str = DEFAULT_GLOB) -> None:
+    """Refuse (ConfigError) an input and output folder a batch cannot use safely.
+
+    The input must be a folder; the output not a file, not the input folder,
+    and, when inside the input folder, holding no clips (this tool's outputs
+    aside), which outputs could replace.
+    """
+    in_dir, out_dir = Path(in_dir), Path(out_dir)
+    if not in_dir.exists():
+        raise ConfigError(f"{in_dir}: no such folder")
+    if not in_dir.is_dir():
+        raise ConfigError(f"{in_dir}: is a file; give the folder it is in (or use 'exaggerate' for files)")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError(f"{out_dir}: exists and is not a folder")
+    if out_dir.resolve() == in_dir.resolve():
+        raise ConfigError(f"{out_dir}: is the input folder; the outputs would sit among the clips")
+    if out_dir.is_dir() and out_dir.resolve().is_relative_to(in_dir.resolve()):
+        held, _ = find_clips(out_dir, pattern)
+        if held:
+            raise ConfigError(f"{out_dir}: is inside {in_dir} and holds clips ({held[0].source}); outputs could "
+                              f"replace them: choose an output folder outside {in_dir}, or a new one")
+
+
+def _manifest(path: Path) -> dict | None:
+    """The manifest at ``path`` as data; None when there is none or it does not read as one."""
+    try:
+        if path.stat().st_size > 50_000_000:
+            return None
+        info = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return info if isinstance(info, dict) and info.get("tool") == "mocap_exaggerate" else None
 
 
 def is_output(path: str | os.PathLike) -> bool:
@@ -235,14 +277,9 @@ def is_output(path: str | os.PathLike) -> bool:
     A batch does not take its own (or an earlier run's) outputs for clips.
     """
     path = Path(path)
-    manifest = path.with_suffix(".json")
-    try:
-        if manifest.stat().st_size > 50_000_000:
-            return False
-        info = json.loads(manifest.read_text(encoding="utf-8"))
-        return info.get("tool") == "mocap_exaggerate" and info["outputs"]["bvh"] == path.name
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
-        return False
+    info = _manifest(path.with_suffix(".json"))
+    outputs = info.get("outputs") if info else None
+    return isinstance(outputs, dict) and outputs.get("bvh") == path.name
 
 
 def clashes(clips: list[Clip], out_dir: str | os.PathLike) -> dict[Clip, str]:
@@ -271,32 +308,30 @@ def is_complete(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions, p
 
 
 def _not_complete(clip: Clip, out_dir, options: BatchOptions, parameters: str | None) -> str | None:
-    """Why ``clip`` must be (re)done under ``out_dir``; None when its outputs can be kept."""
+    """Why ``clip`` must be (re)done under ``out_dir``; None when its outputs can be kept.
+
+    The cheap reasons first (no manifest, other options, another input), the
+    hashing of every output last.
+    """
     from .job import check_output_set, parameters_digest
     from .outputs import file_digest
 
     manifest = Path(out_dir) / clip.relative.parent / f"{clip.name}.json"
-    if not manifest.exists():
-        return "no outputs yet"
-    problems = check_output_set(manifest)
-    if problems:
-        return f"outputs incomplete ({problems[0]})"
-    try:
-        info = json.loads(manifest.read_text(encoding="utf-8"))
-        recorded_input, recorded_parameters = info["input"]["hash"], info["parameters"]
-    except (OSError, ValueError, KeyError, TypeError):
-        return "a manifest from an older version"
+    info = _manifest(manifest)
+    if info is None:
+        return "no outputs yet" if not manifest.exists() else "outputs incomplete (the manifest does not read)"
     if parameters is None:
         parameters = parameters_digest(options.config, preset=options.preset, glb=options.glb, units=options.units,
                                        influences=options.influences, skin=options.skin)
-    if recorded_parameters != parameters:
+    if info.get("parameters") != parameters:
         return "made with other options"
     try:
-        if file_digest(clip.source.read_bytes()) != recorded_input:
+        if file_digest(clip.source.read_bytes()) != (info.get("input") or {}).get("hash"):
             return "the input changed"
     except OSError:
         return "the input cannot be read"
-    return None
+    problems = check_output_set(manifest)
+    return f"outputs incomplete ({problems[0]})" if problems else None
 
 
 def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
@@ -323,7 +358,8 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
                                   error="outputs complete, from the same input and parameters")
         record = convert(clip.source, Path(out_dir) / clip.relative.parent, options.config, preset=options.preset,
                          name=clip.name, overwrite=options.overwrite or options.resume, glb=options.glb,
-                         skin=options.skin, units=options.units, influences=options.influences)
+                         skin=options.skin, units=options.units, influences=options.influences,
+                         parameters=parameters)
     except OutputExistsError as error:
         return failed(f"{error}; --overwrite replaces it (batch --resume keeps finished clips, redoes the rest)")
     except MocapError as error:
@@ -417,6 +453,8 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
     for clip, other in clashes(clips, out_dir).items():  # never write over a clip of the batch
         finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would replace the input {other}; "
                                                                     "choose an output folder apart from the clips"))
+    for clip, other in same_outputs([c for c in clips if c not in done]).items():  # nor one clip's over another's
+        finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would be those of {other.source}"))
     clips = [clip for clip in clips if clip not in done]
 
     if jobs <= 1 or len(clips) <= 1:
@@ -457,20 +495,19 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
                 result = FileResult(str(clip.source), "failed", error="its worker process died (out of memory, or killed)")
             finished(clip, result)
 
-        try:
+        def drain() -> None:  # collect what finishes, handing out the queue (empty after Ctrl-C)
             hand_out()
             while running:
-                ready, _ = wait(list(running), return_when=FIRST_COMPLETED)
-                for future in ready:
+                for future in wait(list(running), return_when=FIRST_COMPLETED)[0]:
                     collect(future)
                 hand_out()
+
+        try:
+            drain()
         except KeyboardInterrupt:
             queue.clear()
             try:  # the clips in hand finish (the workers ignore Ctrl-C); a second Ctrl-C stops them
-                while running:
-                    ready, _ = wait(list(running), return_when=FIRST_COMPLETED)
-                    for future in ready:
-                        collect(future)
+                drain()
             except KeyboardInterrupt:
                 for process in list(getattr(pool, "_processes", {}).values()):
                     process.terminate()

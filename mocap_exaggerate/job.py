@@ -27,7 +27,7 @@ from typing import Any, BinaryIO
 import numpy as np
 
 from .config import DEFAULT_PRESET, PipelineConfig, load_preset
-from .errors import ConfigError, InputError
+from .errors import ConfigError
 from .io.bvh import iter_bvh, read_bvh, read_source
 from .io.files import OutputExistsError, OutputSet, remove_stale_temporaries, same_file
 from .outputs import file_digest
@@ -175,6 +175,7 @@ def convert(
     trails: str | os.PathLike | None = None,
     path_file: str | os.PathLike | None = None,
     protect: tuple[str | os.PathLike, ...] = (),
+    parameters: str | None = None,
 ) -> JobRecord:
     """Exaggerate one clip and write its output set.
 
@@ -193,6 +194,7 @@ def convert(
     trails : also write every stretch's end-effector paths to this JSON file
     path_file : a trails file with edited paths for the limbs to follow
     protect : more files that must never be written over (the pipeline file the config came from)
+    parameters : `parameters_digest` of these settings, when the caller has it already (a batch)
 
     Returns
     -------
@@ -240,8 +242,9 @@ def convert(
     paths = read_trails(path_file) if path_file is not None else None
     if skin is not None:
         skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
-    parameters = parameters_digest(config, preset=preset, glb=glb, units=units, influences=influences, skin=skin,
-                                   path_file=path_file) if not to_stream else None
+    if parameters is None and not to_stream:
+        parameters = parameters_digest(config, preset=preset, glb=glb, units=units, influences=influences, skin=skin,
+                                       path_file=path_file)
 
     timings: dict[str, float] = {}
     motion, report = read_bvh(data, name=label, fps=config.input.fps)

@@ -29,7 +29,7 @@ import numpy as np
 
 from .limbs import find_limbs
 from .motion import Motion
-from .rotations import quat_inv, quat_mul
+from .rotations import quat_angle
 
 __all__ = ["motion_quality", "turn_degrees", "still_frames", "STRETCHED"]
 
@@ -39,9 +39,7 @@ STRETCHED = 1.5
 
 def turn_degrees(local: np.ndarray) -> np.ndarray:
     """(F-1, J) angle in degrees each joint's rotation turns from one frame to the next."""
-    relative = quat_mul(quat_inv(local[:-1]), local[1:])
-    w = np.clip(np.abs(relative[..., 3]), 0.0, 1.0)
-    return np.degrees(2.0 * np.arccos(w))
+    return np.degrees(quat_angle(local[:-1], local[1:]))
 
 
 def still_frames(captured: np.ndarray, frame_time: float, height: float) -> np.ndarray:
@@ -86,10 +84,11 @@ def motion_quality(motion: Motion, result) -> dict:
     jerk_ratio = float(np.percentile(jerk(out), 99) / max(np.percentile(jerk(cap), 99), 1e-12)) \
         if len(cap) > 3 else 1.0
     cap_jump = np.linalg.norm(np.diff(cap, axis=0), axis=-1).max(axis=0, initial=0.0)
-    out_jump = np.linalg.norm(np.diff(out, axis=0), axis=-1).max(axis=0, initial=0.0)
+    out_steps = np.linalg.norm(np.diff(out, axis=0), axis=-1)  # (F-1, J)
+    out_jump = out_steps.max(axis=0, initial=0.0)
     ratios = np.where(cap_jump > 1e-3 * h, out_jump / np.maximum(cap_jump, 1e-12), 0.0)
     worst = int(np.argmax(ratios))
-    worst_frame = int(np.argmax(np.linalg.norm(np.diff(out[:, worst], axis=0), axis=-1))) if len(out) > 1 else 0
+    worst_frame = int(np.argmax(out_steps[:, worst])) if len(out) > 1 else 0
 
     out_skeleton = result.motion.skeleton
     turns = turn_degrees(result.motion.local_rotations)
