@@ -400,8 +400,10 @@ def _batch_options(options: dict[str, Any], *, overwrite: bool, resume: bool, wr
                         influences=int(influences))
 
 
-def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bool, problems=()) -> int:
-    """Run a batch with progress and a summary; the exit code (0 all done, 1 some failed, 130 interrupted)."""
+def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bool, problems=(),
+                  scheduler: str | None = None, settings: str = "") -> int:
+    """Run a batch with progress and a summary (and the report page when the options ask for it);
+    the exit code (0 all done, 1 some failed, 130 interrupted)."""
     import time
 
     from mocap_exaggerate.batch import BatchInterrupted, run_batch
@@ -413,16 +415,29 @@ def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bo
     for problem in problems:
         progress(problem)
     started = time.perf_counter()
-    workers = min(jobs, max(len(clips), 1))
+    if scheduler is None:
+        workers: int | str = min(jobs, max(len(clips), 1))
+    else:
+        workers = f"a local Dask cluster of {jobs} worker(s)" if scheduler == "local" else f"Dask at {scheduler}"
+    pending = []
     try:
-        results = run_batch(clips, out_dir, batch_options, jobs=jobs, on_result=progress)
-        pending = 0
+        results = run_batch(clips, out_dir, batch_options, jobs=jobs, on_result=progress, scheduler=scheduler)
     except BatchInterrupted as stop:
-        results, pending = stop.results, len(stop.pending)
+        results, pending = stop.results, stop.pending
     finally:
         progress.close()
     results = list(problems) + results
-    summary(results, time.perf_counter() - started, workers=workers, pending=pending, quiet=quiet)
+    report = None
+    if batch_options.report:
+        from mocap_exaggerate.report import write_report
+
+        try:
+            report = str(write_report(out_dir, results, pending=pending, title=f"Batch report: {out_dir}",
+                                      settings=settings))
+        except OSError as error:
+            log.error("%s: the report could not be written: %s", out_dir / "index.html", error.strerror or error)
+    summary(results, time.perf_counter() - started, workers=workers, pending=len(pending), quiet=quiet,
+            report=report)
     if pending:
         return 130
     return 1 if any(r.status == "failed" for r in results) else 0
@@ -485,12 +500,20 @@ def _find_batch_clips(in_dir: Path, out_dir: Path, pattern: str):
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON line per file on stdout (input, outputs, status, frames, seconds, "
                    "max_link_stretch, error).")
+@click.option("--report", "write_report", is_flag=True,
+              help="Also write OUT_DIR/index.html: each clip's poses and its fastest end effector's path, captured "
+                   "and exaggerated, with its figures and links (the pictures go under OUT_DIR/report/).")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Run the clips on Dask distributed: 'local' (a LocalCluster of -j workers) or a scheduler "
+                   "address such as tcp://host:8786 (the folders must be at the same paths on its workers). "
+                   "Needs: pip install 'mocap-exaggerate[dask]'.")
 @output_options
 @pipeline_options
 @verbosity_options
 @_fail_cleanly
-def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: bool, as_json: bool, overwrite: bool,
-          skin_path: Path | None, units: str, influences: str, write_glb: bool, **options) -> None:
+def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: bool, as_json: bool,
+          write_report: bool, scheduler: str | None, overwrite: bool, skin_path: Path | None, units: str,
+          influences: str, write_glb: bool, **options) -> None:
     """Exaggerate every clip under IN_DIR into OUT_DIR, mirroring its folders.
 
     A bad file is reported and the rest go on; exit 0 when every file was
@@ -502,15 +525,32 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
       mocap-exaggerate batch mocap/ out/ --preset looney -j 2
       mocap-exaggerate batch mocap/ out/ --resume --json > results.jsonl
       mocap-exaggerate batch mocap/ out/ --glob 'walk*/**/*.bvh' --no-glb
+      mocap-exaggerate batch mocap/ out/ --report        (then open out/index.html)
+      mocap-exaggerate batch /shared/mocap /shared/out --scheduler tcp://farm:8786
     """
-    from mocap_exaggerate.batch import default_jobs
+    import shlex
+
+    from mocap_exaggerate.batch import check_scheduler, default_jobs
 
     batch_options = _batch_options(options, overwrite=overwrite, resume=resume, write_glb=write_glb,
                                    skin_path=skin_path, units=units, influences=influences)
+    batch_options = dataclasses.replace(batch_options, report=write_report)
+    if scheduler is not None:
+        if scheduler != "local" and jobs is not None:
+            raise UserError("-j sets the size of --scheduler local; a Dask scheduler has the workers it has")
+        check_scheduler(scheduler)  # imports Dask, which sets up its own logging: only its errors are said
+        verbose = click.get_current_context().find_root().meta.get("mocap_exaggerate.verbosity", {}).get("verbose", 0)
+        logging.getLogger("distributed").setLevel(logging.INFO if verbose >= 2 else logging.ERROR)
     clips, problems = _find_batch_clips(in_dir, out_dir, pattern)
     _writable(out_dir)
+    if write_report:
+        from mocap_exaggerate.report import check_report
+
+        check_report(out_dir)
+    given = _given_options(click.get_current_context(), exclude=set())
+    settings = shlex.join(["mocap-exaggerate", "batch", str(in_dir), str(out_dir), *given])
     code = _run_reported(clips, out_dir, batch_options, jobs=jobs or default_jobs(), as_json=as_json,
-                         problems=problems)
+                         problems=problems, scheduler=scheduler, settings=settings)
     if code:
         click.get_current_context().exit(code)
 

@@ -86,9 +86,13 @@ class Progress:
             self.bar = None
 
 
-def summary(results: list[FileResult], seconds: float, *, workers: int, pending: int = 0,
-            quiet: bool = False, stream: TextIO | None = None) -> None:
-    """The table at the end: converted, skipped, failed (with reasons), frames, time."""
+def summary(results: list[FileResult], seconds: float, *, workers: int | str, pending: int = 0,
+            quiet: bool = False, stream: TextIO | None = None, report: str | None = None) -> None:
+    """The table at the end: converted, skipped, failed (with reasons), frames, time.
+
+    workers : how many worker processes ran, or what ran the clips (``Dask at tcp://...``)
+    report : the report page written, if any
+    """
     stream = stream or sys.stderr
     counts = {status: sum(r.status == status for r in results) for status in ("converted", "skipped", "failed")}
     frames = sum(r.frames or 0 for r in results if r.status == "converted")
@@ -99,8 +103,8 @@ def summary(results: list[FileResult], seconds: float, *, workers: int, pending:
         return
     files = len(results) + pending
     rate = f", {frames / seconds:,.0f} frames/s" if seconds > 0 and frames else ""
-    click.echo(f"\n{files} file(s) in {seconds:.1f} s with {workers} worker(s): {frames:,} frames converted{rate}",
-               file=stream)
+    engine = f"with {workers} worker(s)" if isinstance(workers, int) else f"on {workers}"
+    click.echo(f"\n{files} file(s) in {seconds:.1f} s {engine}: {frames:,} frames converted{rate}", file=stream)
     click.echo(f"  converted  {counts['converted']:>6}", file=stream)
     click.echo(f"  skipped    {counts['skipped']:>6}", file=stream)
     click.echo(f"  failed     {counts['failed']:>6}", file=stream)
@@ -111,3 +115,5 @@ def summary(results: list[FileResult], seconds: float, *, workers: int, pending:
         click.echo(f"skipped: {_said(result)}", file=stream)
     for result in failed:
         click.echo(f"failed: {_said(result)}", file=stream)
+    if report:
+        click.echo(f"report: {report}", file=stream)

@@ -39,7 +39,7 @@ from .errors import ConfigError, MocapError
 from .io.files import OutputExistsError
 
 __all__ = ["Clip", "BatchOptions", "FileResult", "BatchInterrupted", "find_clips", "glob_regex", "convert_file",
-           "run_batch", "is_complete", "is_output", "same_outputs", "check_folders", "DEFAULT_GLOB"]
+           "run_batch", "run_on_dask", "connect_dask", "check_scheduler", "is_complete", "is_output", "same_outputs", "check_folders", "DEFAULT_GLOB"]
 
 #: Which files a batch takes: every .bvh at any depth (matched without regard to case).
 DEFAULT_GLOB = "**/*.bvh"
@@ -74,6 +74,7 @@ class BatchOptions:
         input bytes with the same parameters; redo the rest (replacing what they left)
     overwrite : replace existing outputs; without it (or resume) a clip whose outputs
         exist fails, saying so
+    report : also draw each clip's pictures for the batch's report (`mocap_exaggerate.report`)
     """
 
     config: PipelineConfig
@@ -84,6 +85,7 @@ class BatchOptions:
     skin: str | None = None
     units: str = "auto"
     influences: int = 4
+    report: bool = False
 
 
 @dataclass
@@ -331,20 +333,43 @@ def _not_complete(clip: Clip, out_dir, options: BatchOptions, parameters: str | 
     except OSError:
         return "the input cannot be read"
     problems = check_output_set(manifest)
-    return f"outputs incomplete ({problems[0]})" if problems else None
+    if problems:
+        return f"outputs incomplete ({problems[0]})"
+    if options.report:
+        from .report import pictures_current
+
+        if not pictures_current(out_dir, manifest):
+            return "its report pictures are missing or were drawn from other outputs"
+    return None
+
+
+def _kept(label: str, clip: Clip, out_dir, started: float) -> FileResult:
+    """The result of a clip whose complete outputs are kept (``resume``): what its manifest says."""
+    from .job import output_paths
+
+    folder = Path(out_dir) / clip.relative.parent
+    info = _manifest(folder / f"{clip.name}.json") or {}
+    listed = info.get("outputs") or {}
+    outputs = {kind: str(path) for kind, path in output_paths(folder, clip.name).items()
+               if kind in listed or kind == "manifest"}
+    stretch = (info.get("result") or {}).get("max_link_stretch")
+    return FileResult(label, "skipped", outputs=outputs, frames=(info.get("result") or {}).get("frames"),
+                      seconds=time.perf_counter() - started, max_link_stretch=stretch,
+                      error="outputs complete, from the same input and parameters")
 
 
 def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
-                 parameters: str | None = None) -> FileResult:
+                 parameters: str | None = None, label: str | None = None) -> FileResult:
     """Convert one clip of a batch into ``out_dir/<its folder>/``; never raises for a bad file.
 
     Whatever goes wrong (a malformed or unreadable file, outputs that exist, a
     full disk, a bug) is the returned result's ``error``, in one line.
+    label : how the manifest and the result name the input (default: ``clip.source``)
     """
     from .job import convert
 
     started = time.perf_counter()
-    label = str(clip.source)
+    label = label if label is not None else str(clip.source)
 
     def failed(message: str) -> FileResult:
         return FileResult(label, "failed", seconds=time.perf_counter() - started, error=message)
@@ -354,10 +379,9 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
         if options.resume:
             redo = _not_complete(clip, out_dir, options, parameters)
             if redo is None:
-                return FileResult(label, "skipped", seconds=time.perf_counter() - started,
-                                  error="outputs complete, from the same input and parameters")
+                return _kept(label, clip, out_dir, started)
         record = convert(clip.source, Path(out_dir) / clip.relative.parent, options.config, preset=options.preset,
-                         name=clip.name, overwrite=options.overwrite or options.resume, glb=options.glb,
+                         name=clip.name, label=label, overwrite=options.overwrite or options.resume, glb=options.glb,
                          skin=options.skin, units=options.units, influences=options.influences,
                          parameters=parameters)
     except OutputExistsError as error:
@@ -371,10 +395,18 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
         return failed("out of memory")
     except Exception as error:  # a bug: reported with the file, and the rest go on
         return failed(f"internal error, please report it: {type(error).__name__}: {error}")
+    notes = ([f"redone: {redo}"] if redo and redo != "no outputs yet" else []) + list(record.notes)
+    if options.report:
+        from .report import write_pictures
+
+        try:  # the outputs are written and sound: a picture that cannot be drawn is a note, not a failure
+            write_pictures(record, out_dir, options.config)
+        except Exception as error:
+            notes.append(f"no report pictures: {type(error).__name__}: {error}")
     return FileResult(label, "converted", outputs={kind: str(path) for kind, path in record.outputs.items()},
                       frames=record.frames, seconds=time.perf_counter() - started,
                       max_link_stretch=round(record.max_link_stretch, 6), warnings=list(record.warnings),
-                      notes=([f"redone: {redo}"] if redo and redo != "no outputs yet" else []) + list(record.notes))
+                      notes=notes)
 
 
 # ---------------------------------------------------------------------------- many files
@@ -430,11 +462,13 @@ def default_jobs() -> int:
 
 
 def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptions, *, jobs: int = 1,
-              on_result: Callable[[FileResult], None] | None = None) -> list[FileResult]:
+              on_result: Callable[[FileResult], None] | None = None,
+              scheduler: str | None = None) -> list[FileResult]:
     """Convert ``clips`` into ``out_dir``; the results in the clips' order.
 
     ``jobs`` > 1 converts in that many worker processes; ``on_result`` hears
-    about each file as it finishes (in the order they finish). The outputs are
+    about each file as it finishes (in the order they finish). ``scheduler``
+    runs the clips on Dask distributed instead (`run_on_dask`). The outputs are
     the same bytes whichever way they ran. Ctrl-C (KeyboardInterrupt) lets the
     clips being converted finish, starts no more, and raises `BatchInterrupted`.
     """
@@ -457,6 +491,10 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
         finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would be those of {other.source}"))
     clips = [clip for clip in clips if clip not in done]
 
+    if scheduler is not None:
+        run_on_dask(clips, out_dir, options, parameters, scheduler=scheduler, jobs=jobs, on_result=finished,
+                    order=order, done=done)
+        return _in_order(done, order)
     if jobs <= 1 or len(clips) <= 1:
         for clip in clips:
             try:
@@ -515,6 +553,91 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
             raise BatchInterrupted(_in_order(done, order), [c for c in clips if c not in done]) from None
         pool.shutdown(wait=True)
     return _in_order(done, order)
+
+
+def check_scheduler(scheduler: str) -> None:
+    """Refuse (ConfigError) a ``scheduler`` that is neither ``local`` nor a Dask address, or Dask missing."""
+    if scheduler != "local" and not re.fullmatch(r"(tcp|tls|ws|wss|inproc|ucx)://[^\s/]+(:\d+)?/?", scheduler):
+        raise ConfigError(f"--scheduler {scheduler!r}: give 'local' or a Dask scheduler's address such as "
+                          "tcp://host:8786")
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise ConfigError("--scheduler needs Dask distributed: pip install 'mocap-exaggerate[dask]'") from None
+
+
+def connect_dask(scheduler: str, jobs: int = 1):
+    """A Dask ``(client, cluster)``: ``local`` starts a `LocalCluster` of ``jobs`` one-thread worker
+    processes (``cluster`` is then to be closed after the client), an address (``tcp://host:8786``)
+    connects to a running scheduler (``cluster`` None). ConfigError when Dask is missing or the
+    scheduler cannot be reached."""
+    import logging
+
+    check_scheduler(scheduler)
+    from distributed import Client, LocalCluster
+
+    if scheduler == "local":
+        with _one_thread_per_worker():
+            cluster = LocalCluster(n_workers=max(jobs, 1), threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
+        try:
+            return Client(cluster), cluster
+        except BaseException:
+            cluster.close()
+            raise
+    try:
+        return Client(scheduler, timeout=10), None
+    except (OSError, TimeoutError) as error:
+        raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: {error}") from None
+
+
+def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptions, parameters: str, *,
+                scheduler: str, jobs: int = 1, on_result: Callable[[Clip, FileResult], None],
+                order: dict[Clip, int], done: dict[Clip, FileResult]) -> None:
+    """`run_batch` on Dask distributed: one task per clip, each result handed on as it comes back.
+
+    The workers read the clips and write the outputs themselves, by absolute path:
+    on a cluster the input and output folders must be at the same paths on every
+    worker (a shared mount). Results and manifests name the files as given here,
+    so the outputs are the bytes a serial run writes.
+    """
+    client, cluster = connect_dask(scheduler, jobs)
+    out_abs = Path(os.path.abspath(out_dir))  # absolute, links not followed: messages name what was given
+    futures = {}
+    try:
+        from distributed import as_completed
+
+        for clip in sorted(clips, key=lambda clip: (-_size(clip.source), order[clip])):  # largest first
+            task = Clip(Path(os.path.abspath(clip.source)), clip.relative)
+            future = client.submit(convert_file, task, out_abs, options, parameters, str(clip.source),
+                                   pure=False, priority=_size(clip.source), key=f"mocap-exaggerate-{order[clip]}-"
+                                   f"{os.getpid()}-{time.monotonic_ns()}")
+            futures[future] = clip
+        try:
+            for future in as_completed(list(futures)):
+                clip = futures[future]
+                try:
+                    result = future.result()
+                except Exception as error:  # the worker died (out of memory, killed), or the task could not run
+                    result = FileResult(str(clip.source), "failed",
+                                        error=f"its Dask task failed: {type(error).__name__}: {error}")
+                result.outputs = {kind: _given(path, out_abs, out_dir) for kind, path in result.outputs.items()}
+                on_result(clip, result)
+        except KeyboardInterrupt:
+            client.cancel([future for future, clip in futures.items() if clip not in done])
+            raise BatchInterrupted(_in_order(done, order), [c for c in clips if c not in done]) from None
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _given(path: str, out_abs: Path, out_dir) -> str:
+    """An output path a worker wrote by its absolute name, named under the output folder as given."""
+    try:
+        return str(Path(out_dir) / Path(path).relative_to(out_abs))
+    except ValueError:
+        return path
 
 
 def _size(path: Path) -> int:

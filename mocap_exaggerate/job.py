@@ -32,6 +32,7 @@ from .io.bvh import iter_bvh, read_bvh, read_source
 from .io.files import OutputExistsError, OutputSet, remove_stale_temporaries, same_file
 from .outputs import file_digest
 from .limbs import find_limbs
+from .motion import Motion
 from .pipeline import PipelineResult, run
 from .skinning import Skin
 from .tpose import detect_rest_frames
@@ -59,6 +60,7 @@ class JobRecord:
     notes : what the pipeline did that the user should hear about (rest frames, stretches found)
     manifest : the manifest as written (None when the BVH went to a stream)
     result : the pipeline's result (positions, hierarchy, figures)
+    captured : the input motion as read (what the pictures of a report compare against)
     """
 
     input: str
@@ -72,6 +74,7 @@ class JobRecord:
     notes: list[str] = field(default_factory=list)
     manifest: dict[str, Any] | None = None
     result: PipelineResult | None = None
+    captured: Motion | None = None
 
 
 def check_name(name: str) -> str:
@@ -315,6 +318,7 @@ def convert(
         notes=list(result.notes),
         manifest=info,
         result=result,
+        captured=motion,
     )
 
 

@@ -1,4 +1,5 @@
-"""Pictures without a GPU or a display: the skinned body at a few frames, captured above, exaggerated below.
+"""Pictures without a GPU or a display: the skinned body at a few frames, captured above, exaggerated
+below (`render_preview`), and one joint's path captured, averaged and exaggerated (`render_trajectory`).
 
 The mesh is posed by linear blend skinning and drawn with matplotlib (Agg) as
 shaded triangles sorted back to front, seen from the side the body faces most.
@@ -18,7 +19,7 @@ from .pipeline import PipelineResult
 from .rotations import quat_rotate
 from .skinning import Skin
 
-__all__ = ["pose_skin", "render_preview", "write_preview"]
+__all__ = ["pose_skin", "render_preview", "telling_frames", "write_preview", "fastest_end", "render_trajectory"]
 
 
 def pose_skin(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray,
@@ -51,8 +52,35 @@ def _draw(ax, vertices: np.ndarray, faces: np.ndarray, axes: tuple[int, int, int
     ax.add_collection(PolyCollection(polygons, facecolors=colors, edgecolors="none"))
 
 
-def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, width: float = 2.4) -> bytes:
-    """A PNG: the captured (top, grey) and exaggerated (bottom, orange) body at evenly spaced frames."""
+def telling_frames(motion: Motion, result: PipelineResult, count: int = 4) -> list[int]:
+    """The ``count`` output frames where the body is most exaggerated, in time order.
+
+    Exaggerated by the largest distance of any joint from where it was captured, relative
+    to the root (so that a body drifting as a whole does not decide), the picks at least
+    an eighth of the clip apart, so that one accent does not fill the row.
+    """
+    offset = result.rest_frames if result.rest_frames_dropped else 0
+    first = 0 if result.rest_frames_dropped else result.rest_frames
+    captured = motion.world_positions()[offset:]
+    exaggerated = result.world_positions[:, result.original_index]
+    moved = (exaggerated - exaggerated[:, :1]) - (captured - captured[:, :1])
+    away = np.linalg.norm(moved, axis=-1).max(axis=1)[first:]
+    apart = max(len(away) // 8, 1)
+    picks: list[int] = []
+    for frame in np.argsort(-away, kind="stable"):
+        if len(picks) == count:
+            break
+        if all(abs(int(frame) - p) >= apart for p in picks):
+            picks.append(int(frame))
+    return sorted(first + p for p in picks)
+
+
+def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, width: float = 2.4,
+                   at: list[int] | None = None) -> bytes:
+    """A PNG: the captured (top, grey) and exaggerated (bottom, orange) body at a few frames.
+
+    ``at``: the output frames to draw (e.g. `telling_frames`); default ``frames`` evenly spaced.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -63,8 +91,11 @@ def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, w
     rubber = output_skin(motion, result, body)
     out_skeleton = result.motion.skeleton
     captured_rot, captured_pos = motion.forward_kinematics()
+    if result.rest_frames_dropped:  # the output starts where the motion does: line the frames up
+        captured_rot, captured_pos = captured_rot[result.rest_frames:], captured_pos[result.rest_frames:]
     first = result.rest_frames if not result.rest_frames_dropped else 0
-    picks = np.unique(np.linspace(first, motion.num_frames - 1, frames).astype(int))
+    last = result.world_positions.shape[0] - 1
+    picks = np.unique(np.linspace(first, last, frames).astype(int) if at is None else np.clip(at, 0, last))
     up = skeleton.up_axis()
     # Look along the horizontal axis the body moves least along (its side).
     horizontal = [a for a in range(3) if a != up]
@@ -94,11 +125,83 @@ def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, w
             if row == 0:
                 ax.set_title(f"frame {frame}", fontsize=9)
     figure.suptitle("captured (top) and exaggerated (bottom)", fontsize=10)
+    return _png(figure)
+
+
+def _png(figure) -> bytes:
+    """The figure as PNG bytes, the same bytes every time (no software or date written)."""
+    import matplotlib.pyplot as plt
+
     figure.tight_layout()
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=80, metadata={"Software": None})
     plt.close(figure)
     return buffer.getvalue()
+
+
+def fastest_end(motion: Motion, first: int = 0) -> int:
+    """The end effector (hand, foot, head of the limbs found) that moves fastest in ``motion``.
+
+    Fastest by the 99th percentile of its world speed from frame ``first`` on, so that one
+    glitch in the capture does not decide. Falls back to the fastest joint of all on a rig
+    whose limbs are not found.
+    """
+    from .limbs import find_limbs
+
+    world = motion.world_positions()[first:]
+    ends = sorted({limb.end for limb in find_limbs(motion.skeleton).values()}) or list(range(motion.skeleton.num_joints))
+    if len(world) < 2:
+        return ends[0]
+    speed = np.linalg.norm(np.diff(world[:, ends], axis=0), axis=-1)
+    return ends[int(np.argmax(np.percentile(speed, 99, axis=0)))]
+
+
+def render_trajectory(motion: Motion, result: PipelineResult, joint: int | str | None = None,
+                      config=None) -> bytes:
+    """A PNG of one joint's world path (default: `fastest_end`), as Kwon and Lee's Figure 3 draws it.
+
+    The captured path (red), its Gaussian average over ``extrapolate.sigma`` (green; what
+    extrapolation exaggerates away from) and the exaggerated path (blue), seen from the
+    side (left) and from above (right). ``config`` gives sigma (default: the default preset).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .config import load_preset
+    from .stages.extrapolate import gaussian_average
+
+    skeleton = motion.skeleton
+    first = result.rest_frames if result.rest_frames_dropped else 0  # the captured frames the output has
+    if joint is None:
+        joint = fastest_end(motion, result.rest_frames)
+    index = skeleton.index(joint) if isinstance(joint, str) else int(joint)
+    captured = motion.world_positions()[first:, index]
+    exaggerated = result.world_positions[:, result.original_index[index]]
+    config = config or load_preset("cartoon")
+    start = result.rest_frames - first  # the rest frames the output kept are not part of the motion
+    sigma = config.extrapolate.sigma_frames(motion.frame_time, max(len(captured) - start, 1))
+    captured, exaggerated = captured[start:], exaggerated[start:]
+    average = gaussian_average(captured, sigma)
+    up = skeleton.up_axis()
+    horizontal = [a for a in range(3) if a != up]
+    spread = np.ptp(captured[:, horizontal], axis=0) if len(captured) else np.zeros(2)
+    right, depth = (horizontal if spread[0] >= spread[1] else horizontal[::-1])
+    figure, axes = plt.subplots(1, 2, figsize=(8.0, 3.4), squeeze=False)
+    for ax, (across, along, title) in zip(axes[0], ((right, up, "side"), (right, depth, "above"))):
+        for path, color, label, width in ((captured, "#c0392b", "captured", 1.6), (average, "#27ae60", "average", 1.2),
+                                          (exaggerated, "#2e6fd8", "exaggerated", 1.6)):
+            ax.plot(path[:, across], path[:, along], color=color, linewidth=width, label=label)
+            if len(path):
+                ax.plot(path[:1, across], path[:1, along], "o", color=color, markersize=3)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(f"{skeleton.names[index]}, seen from {title}", fontsize=9)
+        ax.set_xlabel("XYZ"[across], fontsize=8)
+        ax.set_ylabel("XYZ"[along], fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[0, 0].legend(fontsize=7, loc="best")
+    return _png(figure)
 
 
 
