@@ -19,7 +19,7 @@ from .pipeline import PipelineResult
 from .rotations import quat_rotate
 from .skinning import Skin
 
-__all__ = ["pose_skin", "render_preview", "telling_frames", "write_preview", "fastest_end", "render_trajectory"]
+__all__ = ["pose_skin", "render_preview", "telling_frames", "write_preview", "fastest_end", "render_trajectory", "telling_window"]
 
 
 def pose_skin(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray,
@@ -139,16 +139,19 @@ def _png(figure) -> bytes:
     return buffer.getvalue()
 
 
-def fastest_end(motion: Motion, first: int = 0) -> int:
+def fastest_end(motion: Motion, first: int | None = None) -> int:
     """The end effector (hand, foot, head of the limbs found) that moves fastest in ``motion``.
 
-    Fastest by the 99th percentile of its world speed from frame ``first`` on, so that one
+    Fastest by the 99th percentile of its world speed from frame ``first`` on (default: past
+    the leading rest-pose frames, whose jump into the motion is no move), so that one
     glitch in the capture does not decide. Falls back to the fastest joint of all on a rig
     whose limbs are not found.
     """
     from .limbs import find_limbs
+    from .tpose import detect_rest_frames
 
-    world = motion.world_positions()[first:]
+    world = motion.world_positions()
+    world = world[(detect_rest_frames(motion, world) if first is None else first):]
     ends = sorted({limb.end for limb in find_limbs(motion.skeleton).values()}) or list(range(motion.skeleton.num_joints))
     if len(world) < 2:
         return ends[0]
@@ -156,13 +159,31 @@ def fastest_end(motion: Motion, first: int = 0) -> int:
     return ends[int(np.argmax(np.percentile(speed, 99, axis=0)))]
 
 
+def telling_window(motion: Motion, result: PipelineResult, joint: int, seconds: float = 3.0) -> tuple[int, int]:
+    """Output frames ``[start, end)`` of about ``seconds`` around the moment ``joint`` is moved
+    furthest from its captured path: the part of a long clip a path picture can show."""
+    offset = result.rest_frames if result.rest_frames_dropped else 0
+    first = 0 if result.rest_frames_dropped else result.rest_frames
+    captured = motion.world_positions()[offset:, joint]
+    away = np.linalg.norm(result.world_positions[:, result.original_index[joint]] - captured, axis=-1)
+    total = len(away)
+    width = max(int(round(seconds / motion.frame_time)), 2)
+    if total - first <= width:
+        return first, total
+    peak = first + int(np.argmax(away[first:]))
+    start = int(np.clip(peak - width // 2, first, total - width))
+    return start, start + width
+
+
 def render_trajectory(motion: Motion, result: PipelineResult, joint: int | str | None = None,
-                      config=None) -> bytes:
+                      config=None, frames: tuple[int, int] | None = None) -> bytes:
     """A PNG of one joint's world path (default: `fastest_end`), as Kwon and Lee's Figure 3 draws it.
 
     The captured path (red), its Gaussian average over ``extrapolate.sigma`` (green; what
     extrapolation exaggerates away from) and the exaggerated path (blue), seen from the
     side (left) and from above (right). ``config`` gives sigma (default: the default preset).
+    ``frames``: the output frames ``[start, end)`` to draw (e.g. `telling_window`); default
+    the whole motion past the rest frames. The average is taken over the whole clip.
     """
     import matplotlib
 
@@ -173,36 +194,39 @@ def render_trajectory(motion: Motion, result: PipelineResult, joint: int | str |
     from .stages.extrapolate import gaussian_average
 
     skeleton = motion.skeleton
-    first = result.rest_frames if result.rest_frames_dropped else 0  # the captured frames the output has
+    offset = result.rest_frames if result.rest_frames_dropped else 0  # the captured frames the output has
     if joint is None:
         joint = fastest_end(motion, result.rest_frames)
     index = skeleton.index(joint) if isinstance(joint, str) else int(joint)
-    captured = motion.world_positions()[first:, index]
+    captured = motion.world_positions()[offset:, index]
     exaggerated = result.world_positions[:, result.original_index[index]]
     config = config or load_preset("cartoon")
-    start = result.rest_frames - first  # the rest frames the output kept are not part of the motion
-    sigma = config.extrapolate.sigma_frames(motion.frame_time, max(len(captured) - start, 1))
-    captured, exaggerated = captured[start:], exaggerated[start:]
-    average = gaussian_average(captured, sigma)
+    first = result.rest_frames - offset  # the rest frames the output kept are not part of the motion
+    sigma = config.extrapolate.sigma_frames(motion.frame_time, max(len(captured) - first, 1))
+    average = np.empty_like(captured)
+    average[first:] = gaussian_average(captured[first:], sigma)
+    start, end = frames if frames is not None else (first, len(captured))
+    start, end = max(int(start), first), min(int(end), len(captured))
+    captured, average, exaggerated = captured[start:end], average[start:end], exaggerated[start:end]
     up = skeleton.up_axis()
     horizontal = [a for a in range(3) if a != up]
     spread = np.ptp(captured[:, horizontal], axis=0) if len(captured) else np.zeros(2)
     right, depth = (horizontal if spread[0] >= spread[1] else horizontal[::-1])
     figure, axes = plt.subplots(1, 2, figsize=(8.0, 3.4), squeeze=False)
-    for ax, (across, along, title) in zip(axes[0], ((right, up, "side"), (right, depth, "above"))):
+    for ax, (across, along, title) in zip(axes[0], ((right, up, "the side"), (right, depth, "above"))):
         for path, color, label, width in ((captured, "#c0392b", "captured", 1.6), (average, "#27ae60", "average", 1.2),
                                           (exaggerated, "#2e6fd8", "exaggerated", 1.6)):
             ax.plot(path[:, across], path[:, along], color=color, linewidth=width, label=label)
             if len(path):
                 ax.plot(path[:1, across], path[:1, along], "o", color=color, markersize=3)
         ax.set_aspect("equal", adjustable="datalim")
-        ax.set_title(f"{skeleton.names[index]}, seen from {title}", fontsize=9)
+        ax.set_title(f"seen from {title}", fontsize=9)
         ax.set_xlabel("XYZ"[across], fontsize=8)
         ax.set_ylabel("XYZ"[along], fontsize=8)
         ax.tick_params(labelsize=7)
     axes[0, 0].legend(fontsize=7, loc="best")
+    figure.suptitle(f"{skeleton.names[index]}, frames {start}-{max(end - 1, start)} (dot: start)", fontsize=10)
     return _png(figure)
-
 
 
 def write_preview(source, output: str | os.PathLike, config=None, *, frames: int = 5, overwrite: bool = False,

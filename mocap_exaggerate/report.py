@@ -44,16 +44,18 @@ def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
     digest the pictures were drawn from.
     """
     from .io.files import write_files
-    from .preview import fastest_end, render_preview, render_trajectory, telling_frames
+    from .preview import fastest_end, render_preview, render_trajectory, telling_frames, telling_window
 
     motion, result = record.captured, record.result
     paths = picture_paths(out_dir, record.outputs["manifest"])
     joint = fastest_end(motion, result.rest_frames)
     frames = telling_frames(motion, result, 4)
+    window = telling_window(motion, result, joint)
     info = {"bvh": record.manifest["outputs"]["hashes"]["bvh"], "joint": motion.skeleton.names[joint],
-            "frames": frames, "preview": paths["preview"].name, "trajectory": paths["trajectory"].name}
+            "frames": frames, "window": list(window), "preview": paths["preview"].name,
+            "trajectory": paths["trajectory"].name}
     write_files([(paths["preview"], render_preview(motion, result, at=frames, width=1.8)),
-                 (paths["trajectory"], render_trajectory(motion, result, joint, config)),
+                 (paths["trajectory"], render_trajectory(motion, result, joint, config, frames=window)),
                  (paths["record"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))], overwrite=True)
     return info
 
@@ -138,7 +140,7 @@ def _row(out_dir: Path, result, number: int) -> str:
                         f'exaggerated poses of {name}" src="{_href(out_dir, paths["preview"])}" class="preview"></a></td>'
                         f'<td><a href="{_href(out_dir, paths["trajectory"])}"><img loading="lazy" alt="path of '
                         f'{_e(info.get("joint", ""))}, captured and exaggerated" src="{_href(out_dir, paths["trajectory"])}" '
-                        f'class="trajectory"></a><div class="caption">{_e(info.get("joint", ""))}</div></td>')
+                        f'class="trajectory"></a></td>')
     result_info = (listed or {}).get("result", {})
     fps = (listed or {}).get("input", {}).get("fps")
     frames = result.frames if result.frames is not None else result_info.get("frames")
@@ -148,7 +150,7 @@ def _row(out_dir: Path, result, number: int) -> str:
     return (f'<tr class="{result.status}" id="clip-{number}"><td class="clip">{name}<br>{status}<div class="links">{links}</div></td>'
             f'{pictures}<td class="number">{frames if frames is not None else "?"}{length}</td>'
             f'<td class="number">{f"{stretch:.2f}x" if stretch is not None else "?"}</td>'
-            f'<td>{_events(result_info.get("stretch"))}</td>'
+            f'<td class="events">{_events(result_info.get("stretch"))}</td>'
             f'<td>{_contacts(result_info.get("constraints"))}</td>'
             f'<td class="number">{f"{seconds:.2f} s" if seconds is not None else "?"}'
             f'{"<br><small>(earlier run)</small>" if result.status == "skipped" else ""}</td></tr>')
@@ -161,13 +163,19 @@ def _pending_row(clip) -> str:
 
 
 def _events(events) -> str:
+    """Few events listed; many summed up, with the list one click away."""
     if not events:
         return '<span class="none">none</span>'
     items = []
     for event in events:
         first, last = (event.get("frames") or [None, None])[:2]
         items.append(f'{_e(str(event.get("limb", "?")))} {float(event.get("scale", 0)):.2f}x, frames {first}-{last}')
-    return "<br>".join(items)
+    if len(items) <= 3:
+        return "<br>".join(items)
+    scales = [float(event.get("scale", 0)) for event in events]
+    limbs = sorted({str(event.get("limb", "?")) for event in events})
+    return (f'<details><summary>{len(items)} on {_e(", ".join(limbs))}, {min(scales):.2f}-{max(scales):.2f}x'
+            f'</summary>{"<br>".join(items)}</details>')
 
 
 def _contacts(constraints) -> str:
@@ -205,11 +213,12 @@ h1 {{ font-size: 1.4em; margin-bottom: 0.2em; }}
 table {{ border-collapse: collapse; width: 100%; }}
 th, td {{ border-bottom: 1px solid #ddd; padding: 6px 8px; vertical-align: top; text-align: left; }}
 th {{ background: #f4f4f4; position: sticky; top: 0; }}
-td.clip {{ max-width: 20em; overflow-wrap: anywhere; }}
+td.clip {{ min-width: 11em; max-width: 20em; overflow-wrap: anywhere; }}
+td.events {{ min-width: 11em; }}
+summary {{ cursor: pointer; }}
 td.number {{ text-align: right; white-space: nowrap; }}
-img.preview {{ width: 360px; }}
-img.trajectory {{ width: 340px; }}
-.caption {{ color: #555; font-size: 0.9em; }}
+img.preview {{ width: 300px; }}
+img.trajectory {{ width: 300px; }}
 .links a {{ margin-right: 0.5em; font-size: 0.9em; }}
 .status {{ font-size: 0.85em; padding: 1px 6px; border-radius: 3px; }}
 .status.converted {{ background: #dff3e4; }}
