@@ -299,6 +299,7 @@ class ConstraintPlan(NamedTuple):
 
     contacts: ContactConfig
     targets: tuple[TargetSpec, ...]
+    max_speed: float = 0.0  # the extrapolation's, which easing onto a contact keeps to
 
 
 def _constraints(state: State, plan: ConstraintPlan) -> State:
@@ -325,7 +326,8 @@ def _constraints(state: State, plan: ConstraintPlan) -> State:
     result = constrain(
         positions[first:], hierarchy, skeleton, state.limbs, state.captured_pos[first:], state.captured_rot[first:],
         motion.frame_time, config=plan.contacts, targets=tuple(targets), keys=tuple(keys), groups=groups,
-        incoming=lambda joint: incoming_joint(skeleton, joint),
+        incoming=lambda joint: incoming_joint(skeleton, joint), max_speed=plan.max_speed,
+        riders=rider_joints(skeleton),
     )
     out = positions.copy()
     out[first:] = result.positions
@@ -379,7 +381,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("subjoints", _subjoints, _block("subjoints")),
     Stage("springs", _springs, lambda c: c.springs if c.springs.enabled and c.springs.blend > 0 else None),
     Stage("constraints", _constraints,
-          lambda c: ConstraintPlan(c.contacts, c.target)
+          lambda c: ConstraintPlan(c.contacts, c.target, c.extrapolate.max_speed if c.extrapolate.enabled else 0.0)
           if c.contacts.enabled or c.target or c.stretch or c.auto_stretch.enabled else None),
     Stage("orient", _orient,
           lambda c: (c.output, c.extrapolate.max_speed if c.extrapolate.enabled else 0.0)),

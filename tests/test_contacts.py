@@ -328,3 +328,39 @@ def test_the_eases_of_two_close_contacts_meet_without_a_corner():
     assert between.min() > 0.0  # the two eases overlap...
     # ...and the foot's weight turns smoothly where they meet (a max of the two had a corner there).
     assert np.abs(np.diff(between, 2)).max() < 0.12
+
+
+def _eased(path, shift, first, length):
+    """The path eased onto its run at ``first`` over ``length`` frames before it, as the stage eases it."""
+    from mocap_exaggerate.stages.contacts import contact_weights
+
+    runs = np.array([[first, len(path) - 1]])
+    weight = contact_weights(runs, len(path), np.array([[length, 0.0]]))
+    return path + weight[:, None, None] * shift[:, None, :]
+
+
+def test_an_ease_is_the_shortest_that_keeps_the_eased_path_to_the_limit():
+    from mocap_exaggerate.stages.contacts import ease_lengths
+
+    frames, first = 120, 100
+    still = np.zeros((frames, 1, 3))
+    shift = np.tile([0.9, 0.0, 0.0], (frames, 1))  # the run is 0.9 away; the point may move 0.05 a frame
+    (length, _), = ease_lengths(np.array([[first, frames - 1]]), still, shift, np.array([0.05]), 2, 60)
+    steps = lambda n: np.linalg.norm(np.diff(_eased(still, shift, first, n)[:, 0], axis=0), axis=-1).max()
+    assert steps(length) <= 0.05 + 1e-12 < steps(length - 1)
+    assert 1.875 * 0.9 / 0.05 - 2 <= length <= 1.875 * 0.9 / 0.05  # a smootherstep's steepest slope, 15/8
+
+
+def test_an_ease_along_a_fast_move_is_longer_than_one_against_it():
+    from mocap_exaggerate.stages.contacts import ease_lengths
+
+    frames, first = 120, 100
+    moving = np.zeros((frames, 1, 3))
+    moving[:, 0, 0] = 0.04 * np.arange(frames)  # at 0.04 a frame, the limit 0.05: room for 0.01 more
+    runs = np.array([[first, frames - 1]])
+    along = np.tile([0.3, 0.0, 0.0], (frames, 1))
+    (with_it, _), = ease_lengths(runs, moving, along, np.array([0.05]), 2, 60)
+    (against_it, _), = ease_lengths(runs, moving, -along, np.array([0.05]), 2, 60)
+    assert against_it < with_it
+    step = np.linalg.norm(np.diff(_eased(moving, along, first, with_it)[:, 0], axis=0), axis=-1)
+    assert step.max() <= 0.05 + 1e-12

@@ -58,6 +58,7 @@ __all__ = [
     "constrain",
     "contact_weights",
     "run_ramps",
+    "ease_lengths",
     "laplacian_deform",
     "two_bone_ik",
     "soft_floor",
@@ -418,6 +419,40 @@ def run_ramps(runs: np.ndarray, gap: np.ndarray, speed: float, ramp: float, long
     return out
 
 
+def ease_lengths(runs: np.ndarray, paths: np.ndarray, shift: np.ndarray, limits: np.ndarray, ramp: float,
+                 longest: float) -> np.ndarray:
+    """Frames ``(n, 2)`` to ease into and out of each run, chosen by the speed of the eased path.
+
+    paths : (F, k, 3) the points that move with the eased one (a foot and the toes riding it)
+    shift : (F, 3) where the eased point must go minus where it is (the move the ease adds)
+    limits : (k,) the step per frame each point may take (the extrapolation's speed limit)
+
+    Easing over ``R`` frames moves the points by ``w_R(d) shift`` at ``d`` frames from the run
+    (``w_R`` the smootherstep of `contact_weights`). The ease is the shortest ``R >= ramp`` for
+    which no point steps further than ``max(limit, its own step before the ease)`` anywhere in
+    the ``longest`` frames beside the run; where none is, the ``R`` whose worst step is the
+    smallest. Unlike `run_ramps`, which bounds the move the ease adds, this bounds the
+    path the viewer sees: an ease that adds speed along a move already at the limit is
+    lengthened, one that adds speed against the move is not.
+    """
+    frames = len(paths)
+    longest = max(int(np.ceil(longest)), int(np.ceil(ramp)))
+    distance = np.arange(longest + 2)  # frames from the run's edge (0: its first or last frame)
+    lengths = np.arange(int(np.ceil(ramp)), longest + 1)
+    weights = smootherstep(np.clip(1.0 - distance[None, :] / (lengths[:, None] + 1.0), 0.0, 1.0))  # (R, d)
+    out = np.empty((len(runs), 2))
+    for row, (first, last) in enumerate(runs):  # a loop over contacts, not frames
+        for side, (start, direction) in enumerate(((first, -1), (last, 1))):
+            reach = np.clip(start + direction * distance, 0, frames - 1)
+            own = np.linalg.norm(np.diff(paths[reach], axis=0), axis=-1)  # (d-1, k)
+            eased = paths[reach][None] + weights[:, :, None, None] * shift[reach][None, :, None, :]
+            steps = np.linalg.norm(np.diff(eased, axis=1), axis=-1)  # (R, d-1, k)
+            worst = (steps / np.maximum(own, limits)[None]).max(axis=(1, 2))
+            fits = np.flatnonzero(worst <= 1.0 + 1e-9)
+            out[row, side] = lengths[fits[0]] if len(fits) else lengths[int(np.argmin(worst))]
+    return out
+
+
 def anchored_targets(captured: np.ndarray, current: np.ndarray, runs: np.ndarray, ground: Ground) -> np.ndarray:
     """Targets ``(F, 3)`` for ``anchor = "exaggerated"``: the captured path moved, in each contact,
     by the horizontal offset of the exaggerated position on its first frame; the offset
@@ -597,6 +632,8 @@ def constrain(
     keys: tuple[StretchKey, ...] = (),
     groups: tuple[tuple[int, ...], ...] = (),
     incoming=None,
+    max_speed: float = 0.0,
+    riders: dict[int, list[int]] | None = None,
 ) -> ConstraintResult:
     """Restore contacts, targets, stretch keys and the floor on rubber positions.
 
@@ -607,6 +644,9 @@ def constrain(
     keys : stretch keys, frames counted in ``sub_pos``
     groups : rubber groups of original joints (their ends are end effectors too)
     incoming : ``joint -> joint`` whose link turns an end effector (as orientation recovery does)
+    max_speed : the extrapolation's speed limit (times each joint's captured top speed): a foot
+        easing onto its contact and the joints ``riders`` (joint -> rigid riders) keep to it too
+        (`ease_lengths`); the ease adds at most the foot's captured top speed in any case (`run_ramps`)
     """
     out = np.array(sub_pos, dtype=np.float64)
     frames = out.shape[0]
@@ -637,7 +677,13 @@ def constrain(
             # A foot landing far from where the exaggeration put it eases in longer, not faster.
             gap = np.linalg.norm(target - out[:, original[joint]], axis=-1)
             speed = float(np.linalg.norm(np.diff(captured_pos[:, joint], axis=0), axis=-1).max(initial=0.0))
-            weight = contact_weights(runs, frames, run_ramps(runs, gap, speed, ramp, 0.5 / frame_time))
+            lengths = run_ramps(runs, gap, speed, ramp, 0.5 / frame_time)
+            if max_speed > 0:  # and long enough that the foot and its toes keep to the speed limit
+                moving = [joint, *(riders or {}).get(joint, [])]
+                limits = max_speed * np.linalg.norm(np.diff(captured_pos[:, moving], axis=0), axis=-1).max(axis=0)
+                lengths = np.maximum(lengths, ease_lengths(runs, out[:, original[moving]], target - out[:, original[joint]],
+                                                           limits, ramp, 0.5 / frame_time))
+            weight = contact_weights(runs, frames, lengths)
             g = goal(joint)
             g += weight[:, None] * (target - g)
             pins[joint] = weight
