@@ -5,7 +5,8 @@ times into a folder, runs ``mocap-exaggerate batch`` on it as a user would (a ne
 process, ``--json``), serially (``-j 1``) and with ``-j 2`` (or ``--jobs``), and
 prints files/s, frames/s, the speed-up, and the overhead: wall time a file costs
 beyond its own conversion (worker start-up and imports, handing work out, reporting),
-``(wall x workers - sum of per-file seconds) / files``.
+``(wall x workers - sum of per-file seconds) / files``. ``--dask`` adds a run on a Dask
+LocalCluster of as many workers; ``--report`` draws the report's pictures in every run.
 
 Not a test: run it by hand (``python bench/batch.py``) and quote the figures.
 """
@@ -35,6 +36,8 @@ def run(folder: Path, out: Path, jobs: int, extra: list[str]) -> tuple[float, li
     start = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "-q", "batch", str(folder), str(out),
                            "-j", str(jobs), "--json", *extra], capture_output=True, text=True)
+    if done.returncode != 0 and "Dask" in done.stderr:
+        sys.exit(f"batch --scheduler local: {done.stderr.strip()}")
     wall = time.perf_counter() - start
     if done.returncode != 0:
         sys.exit(f"batch -j {jobs} failed ({done.returncode}): {done.stderr.strip()}")
@@ -46,8 +49,10 @@ def main() -> None:
     parser.add_argument("--copies", type=int, default=2, help="copies of each clip (default 2)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--no-glb", action="store_true", help="BVH and manifest only")
+    parser.add_argument("--dask", action="store_true", help="also on a Dask LocalCluster of --jobs workers")
+    parser.add_argument("--report", action="store_true", help="with --report (the pictures of every clip)")
     args = parser.parse_args()
-    extra = ["--no-glb"] if args.no_glb else []
+    extra = (["--no-glb"] if args.no_glb else []) + (["--report"] if args.report else [])
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "in"
         for k in range(args.copies):
@@ -56,24 +61,30 @@ def main() -> None:
                 shutil.copy(clip, folder / f"copy{k}" / clip.name)
         files = sum(1 for _ in folder.rglob("*.bvh"))
         rows = []
-        for jobs in (1, args.jobs):
-            wall, results = run(folder, Path(tmp) / f"out{jobs}", jobs, extra)
+        runs = [("serial", 1, []), ("pool", args.jobs, [])]
+        if args.dask:
+            runs.append(("Dask LocalCluster", args.jobs, ["--scheduler", "local"]))
+        for engine, jobs, more in runs:
+            out = Path(tmp) / f"out-{engine.split()[0]}"
+            wall, results = run(folder, out, jobs, extra + more)
             frames = sum(r["frames"] or 0 for r in results)
             inside = sum(r["seconds"] for r in results)
-            rows.append((jobs, wall, frames, inside))
+            rows.append((engine, jobs, wall, frames, inside, out))
         print(f"{files} files ({args.copies} copies of {files // args.copies} clips), "
-              f"{'BVH only' if args.no_glb else 'BVH + GLB'}, on {Path(tmp)}\n")
-        print("| workers | wall (s) | files/s | frames/s | speed-up | overhead per file (s) |")
-        print("|---|---|---|---|---|---|")
-        serial = rows[0][1]
-        for jobs, wall, frames, inside in rows:
+              f"{'BVH only' if args.no_glb else 'BVH + GLB'}{', with --report' if args.report else ''}, "
+              f"on {Path(tmp)}\n")
+        print("| engine | workers | wall (s) | files/s | frames/s | speed-up | overhead per file (s) |")
+        print("|---|---|---|---|---|---|---|")
+        serial = rows[0][2]
+        for engine, jobs, wall, frames, inside, _ in rows:
             overhead = (wall * jobs - inside) / files
-            print(f"| {jobs} | {wall:.2f} | {files / wall:.2f} | {frames / wall:,.0f} | {serial / wall:.2f}x "
+            print(f"| {engine} | {jobs} | {wall:.2f} | {files / wall:.2f} | {frames / wall:,.0f} | {serial / wall:.2f}x "
                   f"| {overhead:.3f} |")
-        outs = [Path(tmp) / f"out{jobs}" for jobs, *_ in rows]
-        same = all((outs[0] / p.relative_to(outs[0])).read_bytes() == (outs[1] / p.relative_to(outs[0])).read_bytes()
-                   for p in outs[0].rglob("*") if p.is_file() and p.suffix != ".json")
-        print(f"\noutputs byte-identical serial vs pool (manifests aside, whose timings differ): {same}")
+        first = rows[0][5]
+        for engine, *_, out in rows[1:]:
+            same = all((first / p.relative_to(first)).read_bytes() == (out / p.relative_to(first)).read_bytes()
+                       for p in first.rglob("*") if p.is_file() and p.suffix != ".json")
+            print(f"\noutputs byte-identical serial vs {engine} (manifests aside, whose timings differ): {same}")
 
 
 if __name__ == "__main__":

@@ -419,13 +419,15 @@ def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bo
         workers: int | str = min(jobs, max(len(clips), 1))
     else:
         workers = f"a local Dask cluster of {jobs} worker(s)" if scheduler == "local" else f"Dask at {scheduler}"
-    pending = []
+    pending, reason = [], None
     try:
         results = run_batch(clips, out_dir, batch_options, jobs=jobs, on_result=progress, scheduler=scheduler)
     except BatchInterrupted as stop:
-        results, pending = stop.results, stop.pending
+        results, pending, reason = stop.results, stop.pending, stop.reason
     finally:
         progress.close()
+    if reason:
+        log.error("%s; %d file(s) not done (--resume finishes them)", reason, len(pending))
     results = list(problems) + results
     report = None
     if batch_options.report:
@@ -439,7 +441,7 @@ def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bo
     summary(results, time.perf_counter() - started, workers=workers, pending=len(pending), quiet=quiet,
             report=report)
     if pending:
-        return 130
+        return 1 if reason else 130
     return 1 if any(r.status == "failed" for r in results) else 0
 
 
@@ -538,19 +540,28 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
     if scheduler is not None:
         if scheduler != "local" and jobs is not None:
             raise UserError("-j sets the size of --scheduler local; a Dask scheduler has the workers it has")
-        check_scheduler(scheduler)  # imports Dask, which sets up its own logging: only its errors are said
+        check_scheduler(scheduler)  # imports Dask, which logs its own way: said with -vv (we say what matters)
         verbose = click.get_current_context().find_root().meta.get("mocap_exaggerate.verbosity", {}).get("verbose", 0)
-        logging.getLogger("distributed").setLevel(logging.INFO if verbose >= 2 else logging.ERROR)
+        logging.getLogger("distributed").setLevel(logging.INFO if verbose >= 2 else logging.CRITICAL)
     clips, problems = _find_batch_clips(in_dir, out_dir, pattern)
+    created = not out_dir.exists()
     _writable(out_dir)
-    if write_report:
-        from mocap_exaggerate.report import check_report
+    try:
+        if write_report:
+            from mocap_exaggerate.report import check_report
 
-        check_report(out_dir)
-    given = _given_options(click.get_current_context(), exclude=set())
-    settings = shlex.join(["mocap-exaggerate", "batch", str(in_dir), str(out_dir), *given])
-    code = _run_reported(clips, out_dir, batch_options, jobs=jobs or default_jobs(), as_json=as_json,
-                         problems=problems, scheduler=scheduler, settings=settings)
+            check_report(out_dir)
+        given = _given_options(click.get_current_context(), exclude=set())
+        settings = shlex.join(["mocap-exaggerate", "batch", str(in_dir), str(out_dir), *given])
+        code = _run_reported(clips, out_dir, batch_options, jobs=jobs or default_jobs(), as_json=as_json,
+                             problems=problems, scheduler=scheduler, settings=settings)
+    except (UserError, MocapError):  # refused before any clip ran: leave no empty folder of ours behind
+        if created:
+            try:
+                out_dir.rmdir()
+            except OSError:
+                pass
+        raise
     if code:
         click.get_current_context().exit(code)
 

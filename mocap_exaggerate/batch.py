@@ -113,12 +113,16 @@ class FileResult:
 
 
 class BatchInterrupted(Exception):
-    """Ctrl-C during `run_batch`: the files that finished (``results``) and those never started (``pending``)."""
+    """A batch stopped before its end: the files that finished (``results``) and those not done (``pending``).
 
-    def __init__(self, results: list[FileResult], pending: list[Clip]) -> None:
-        super().__init__(f"interrupted: {len(results)} file(s) finished, {len(pending)} not started")
+    reason : None after Ctrl-C; what stopped it otherwise (the Dask scheduler was lost)
+    """
+
+    def __init__(self, results: list[FileResult], pending: list[Clip], reason: str | None = None) -> None:
+        super().__init__(reason or f"interrupted: {len(results)} file(s) finished, {len(pending)} not started")
         self.results = results
         self.pending = pending
+        self.reason = reason
 
 
 # ---------------------------------------------------------------------------- finding clips
@@ -399,10 +403,15 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
     if options.report:
         from .report import write_pictures
 
-        try:  # the outputs are written and sound: a picture that cannot be drawn is a note, not a failure
+        warnings = list(record.warnings)
+        try:  # the outputs are written and sound: a picture that cannot be drawn is a warning, not a failure
             write_pictures(record, out_dir, options.config)
+        except OSError as error:
+            where = f"{error.filename}: " if getattr(error, "filename", None) else ""
+            warnings.append(f"no report pictures: {where}{error.strerror or error}")
         except Exception as error:
-            notes.append(f"no report pictures: {type(error).__name__}: {error}")
+            warnings.append(f"no report pictures: {type(error).__name__}: {error}")
+        record.warnings = warnings
     return FileResult(label, "converted", outputs={kind: str(path) for kind, path in record.outputs.items()},
                       frames=record.frames, seconds=time.perf_counter() - started,
                       max_link_stretch=round(record.max_link_stretch, 6), warnings=list(record.warnings),
@@ -484,6 +493,14 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
         if on_result is not None:
             on_result(result)
 
+    from .job import check_name
+
+    for clip in clips:  # a name no output can have fails that clip alone
+        try:
+            check_name(clip.name)
+        except ConfigError as error:
+            finished(clip, FileResult(str(clip.source), "failed", error=f"{clip.source}: {error}"))
+    clips = [clip for clip in clips if clip not in done]
     for clip, other in clashes(clips, out_dir).items():  # never write over a clip of the batch
         finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would replace the input {other}; "
                                                                     "choose an output folder apart from the clips"))
@@ -557,7 +574,7 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
 
 def check_scheduler(scheduler: str) -> None:
     """Refuse (ConfigError) a ``scheduler`` that is neither ``local`` nor a Dask address, or Dask missing."""
-    if scheduler != "local" and not re.fullmatch(r"(tcp|tls|ws|wss|inproc|ucx)://[^\s/]+(:\d+)?/?", scheduler):
+    if scheduler != "local" and not re.fullmatch(r"(tcp|tls|ws|wss|inproc|ucx)://\S+", scheduler):
         raise ConfigError(f"--scheduler {scheduler!r}: give 'local' or a Dask scheduler's address such as "
                           "tcp://host:8786")
     try:
@@ -577,18 +594,38 @@ def connect_dask(scheduler: str, jobs: int = 1):
     from distributed import Client, LocalCluster
 
     if scheduler == "local":
-        with _one_thread_per_worker():
-            cluster = LocalCluster(n_workers=max(jobs, 1), threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
+        try:
+            with _one_thread_per_worker():
+                cluster = LocalCluster(n_workers=max(jobs, 1), threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.ERROR)
+        except (KeyboardInterrupt, BatchInterrupted):
+            raise
+        except Exception as error:  # Dask's own failures to start (a port, a worker that did not come up)
+            raise ConfigError(f"--scheduler local: the local Dask cluster did not start: "
+                              f"{type(error).__name__}: {error}") from None
         try:
             return Client(cluster), cluster
         except BaseException:
             cluster.close()
             raise
     try:
-        return Client(scheduler, timeout=10), None
+        client = Client(scheduler, timeout=10)
     except (OSError, TimeoutError) as error:
         raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: {error}") from None
+    try:
+        client.wait_for_workers(1, timeout=WAIT_FOR_WORKERS)
+    except TimeoutError:
+        client.close()
+        raise ConfigError(f"--scheduler {scheduler}: the scheduler has no workers (waited {WAIT_FOR_WORKERS:g} s); "
+                          f"start some: dask worker {scheduler} --nthreads 1") from None
+    except BaseException:
+        client.close()
+        raise
+    return client, None
+
+
+#: Seconds a batch waits for a Dask scheduler without workers to get one.
+WAIT_FOR_WORKERS = 30.0
 
 
 def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptions, parameters: str, *,
@@ -601,7 +638,10 @@ def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOpt
     worker (a shared mount). Results and manifests name the files as given here,
     so the outputs are the bytes a serial run writes.
     """
-    client, cluster = connect_dask(scheduler, jobs)
+    try:
+        client, cluster = connect_dask(scheduler, jobs)
+    except KeyboardInterrupt:  # Ctrl-C while the cluster starts: nothing ran
+        raise BatchInterrupted(_in_order(done, order), [c for c in clips if c not in done]) from None
     out_abs = Path(os.path.abspath(out_dir))  # absolute, links not followed: messages name what was given
     futures = {}
     try:
@@ -618,7 +658,11 @@ def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOpt
                 clip = futures[future]
                 try:
                     result = future.result()
-                except Exception as error:  # the worker died (out of memory, killed), or the task could not run
+                except Exception as error:
+                    if future.cancelled() or client.status != "running":  # not this clip's doing: the scheduler went
+                        raise BatchInterrupted(_in_order(done, order), [c for c in clips if c not in done],
+                                               reason=f"lost the Dask scheduler at {scheduler}") from None
+                    # The task failed: its worker died (out of memory, killed) too often, say.
                     result = FileResult(str(clip.source), "failed",
                                         error=f"its Dask task failed: {type(error).__name__}: {error}")
                 result.outputs = {kind: _given(path, out_abs, out_dir) for kind, path in result.outputs.items()}

@@ -76,7 +76,7 @@ def telling_frames(motion: Motion, result: PipelineResult, count: int = 4) -> li
 
 
 def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, width: float = 2.4,
-                   at: list[int] | None = None) -> bytes:
+                   at: list[int] | None = None, dpi: int = 80) -> bytes:
     """A PNG: the captured (top, grey) and exaggerated (bottom, orange) body at a few frames.
 
     ``at``: the output frames to draw (e.g. `telling_frames`); default ``frames`` evenly spaced.
@@ -125,16 +125,16 @@ def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, w
             if row == 0:
                 ax.set_title(f"frame {frame}", fontsize=9)
     figure.suptitle("captured (top) and exaggerated (bottom)", fontsize=10)
-    return _png(figure)
+    return _png(figure, dpi)
 
 
-def _png(figure) -> bytes:
+def _png(figure, dpi: int = 80) -> bytes:
     """The figure as PNG bytes, the same bytes every time (no software or date written)."""
     import matplotlib.pyplot as plt
 
     figure.tight_layout()
     buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=80, metadata={"Software": None})
+    figure.savefig(buffer, format="png", dpi=dpi, metadata={"Software": None})
     plt.close(figure)
     return buffer.getvalue()
 
@@ -176,11 +176,12 @@ def telling_window(motion: Motion, result: PipelineResult, joint: int, seconds: 
 
 
 def render_trajectory(motion: Motion, result: PipelineResult, joint: int | str | None = None,
-                      config=None, frames: tuple[int, int] | None = None) -> bytes:
+                      config=None, frames: tuple[int, int] | None = None, dpi: int = 80) -> bytes:
     """A PNG of one joint's world path (default: `fastest_end`), as Kwon and Lee's Figure 3 draws it.
 
-    The captured path (red), its Gaussian average over ``extrapolate.sigma`` (green; what
-    extrapolation exaggerates away from) and the exaggerated path (blue), seen from the
+    The captured path (grey), its Gaussian average over ``extrapolate.sigma`` (green; what
+    extrapolation exaggerates away from) and the exaggerated path (orange, as the exaggerated
+    body of `render_preview`; the paper draws them red, green and blue), seen from the
     side (left) and from above (right). ``config`` gives sigma (default: the default preset).
     ``frames``: the output frames ``[start, end)`` to draw (e.g. `telling_window`); default
     the whole motion past the rest frames. The average is taken over the whole clip.
@@ -214,8 +215,8 @@ def render_trajectory(motion: Motion, result: PipelineResult, joint: int | str |
     right, depth = (horizontal if spread[0] >= spread[1] else horizontal[::-1])
     figure, axes = plt.subplots(1, 2, figsize=(8.0, 3.4), squeeze=False)
     for ax, (across, along, title) in zip(axes[0], ((right, up, "the side"), (right, depth, "above"))):
-        for path, color, label, width in ((captured, "#c0392b", "captured", 1.6), (average, "#27ae60", "average", 1.2),
-                                          (exaggerated, "#2e6fd8", "exaggerated", 1.6)):
+        for path, color, label, width in ((captured, "#6b6b70", "captured", 1.6), (average, "#27ae60", "average", 1.2),
+                                          (exaggerated, "#f08c2e", "exaggerated", 1.8)):
             ax.plot(path[:, across], path[:, along], color=color, linewidth=width, label=label)
             if len(path):
                 ax.plot(path[:1, across], path[:1, along], "o", color=color, markersize=3)
@@ -226,7 +227,7 @@ def render_trajectory(motion: Motion, result: PipelineResult, joint: int | str |
         ax.tick_params(labelsize=7)
     axes[0, 0].legend(fontsize=7, loc="best")
     figure.suptitle(f"{skeleton.names[index]}, frames {start}-{max(end - 1, start)} (dot: start)", fontsize=10)
-    return _png(figure)
+    return _png(figure, dpi)
 
 
 def write_preview(source, output: str | os.PathLike, config=None, *, frames: int = 5, overwrite: bool = False,

@@ -54,8 +54,8 @@ def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
     info = {"bvh": record.manifest["outputs"]["hashes"]["bvh"], "joint": motion.skeleton.names[joint],
             "frames": frames, "window": list(window), "preview": paths["preview"].name,
             "trajectory": paths["trajectory"].name}
-    write_files([(paths["preview"], render_preview(motion, result, at=frames, width=1.8)),
-                 (paths["trajectory"], render_trajectory(motion, result, joint, config, frames=window)),
+    write_files([(paths["preview"], render_preview(motion, result, at=frames, width=1.8, dpi=110)),
+                 (paths["trajectory"], render_trajectory(motion, result, joint, config, frames=window, dpi=100)),
                  (paths["record"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))], overwrite=True)
     return info
 
@@ -71,7 +71,12 @@ def pictures_current(out_dir: str | os.PathLike, manifest: str | os.PathLike) ->
 
 
 def check_report(out_dir: str | os.PathLike) -> None:
-    """Refuse (ConfigError) to write the report over an index.html this tool did not write."""
+    """Refuse (ConfigError) to write the report over an index.html this tool did not write, or
+    where its pictures cannot go."""
+    pictures = Path(out_dir) / REPORT_FOLDER
+    if (pictures.exists() or pictures.is_symlink()) and not pictures.is_dir():
+        raise ConfigError(f"{pictures}: is not a folder; the report's pictures go there (move it, or choose "
+                          "another output folder)")
     index = Path(out_dir) / "index.html"
     if index.exists():
         try:
@@ -124,10 +129,10 @@ def write_report(out_dir: str | os.PathLike, results, *, pending=(), title: str 
 def _row(out_dir: Path, result, number: int) -> str:
     name = _e(result.input)
     status = f'<span class="status {result.status}">{result.status}</span>'
-    if result.status == "failed":
-        return (f'<tr class="failed" id="clip-{number}"><td class="clip">{name}<br>{status}</td>'
-                f'<td colspan="7" class="error">{_e(result.error or "")}</td></tr>')
     manifest_path = result.outputs.get("manifest")
+    if result.status == "failed" or not manifest_path:  # failed, or skipped with nothing made (a folder loop)
+        return (f'<tr class="{result.status}" id="clip-{number}"><td class="clip">{name}<br>{status}</td>'
+                f'<td colspan="7" class="error">{_e(result.error or "")}</td></tr>')
     listed = _read_json(Path(manifest_path)) if manifest_path else None
     links = " ".join(f'<a href="{_href(out_dir, path)}">{kind}</a>' for kind, path in result.outputs.items()
                      if kind in ("bvh", "glb", "weights", "pipeline", "manifest"))
@@ -185,18 +190,20 @@ def _contacts(constraints) -> str:
     items = []
     for joint, runs in contacts.items():
         held = sum(int(end) - int(start) + 1 for start, end in runs)
-        items.append(f"{_e(joint)}: {len(runs)} ({held} frames)")
+        items.append(f"{_e(joint)}: {len(runs)}x, {held} frames down")
     return "<br>".join(items)
 
 
 def _href(out_dir: Path, path) -> str:
-    """A link from the report to ``path``, relative, every character that needs it escaped."""
+    """A link from the report to ``path``, relative, every character that needs it escaped
+    (a name's bytes as they are on disk, UTF-8 or not)."""
     relative = os.path.relpath(Path(path).resolve(), out_dir.resolve())
-    return html.escape(quote(Path(relative).as_posix()), quote=True)
+    return html.escape(quote(os.fsencode(Path(relative).as_posix())), quote=True)
 
 
-def _e(text: str) -> str:
-    return html.escape(str(text), quote=True)
+def _e(text) -> str:
+    """``text`` for the page: HTML-escaped, a name that is not UTF-8 shown with its odd bytes replaced."""
+    return html.escape(str(text).encode("utf-8", "surrogateescape").decode("utf-8", "replace"), quote=True)
 
 
 _PAGE = """<!DOCTYPE html>
@@ -217,8 +224,8 @@ td.clip {{ min-width: 11em; max-width: 20em; overflow-wrap: anywhere; }}
 td.events {{ min-width: 11em; }}
 summary {{ cursor: pointer; }}
 td.number {{ text-align: right; white-space: nowrap; }}
-img.preview {{ width: 300px; }}
-img.trajectory {{ width: 300px; }}
+img.preview {{ width: 440px; }}
+img.trajectory {{ width: 400px; }}
 .links a {{ margin-right: 0.5em; font-size: 0.9em; }}
 .status {{ font-size: 0.85em; padding: 1px 6px; border-radius: 3px; }}
 .status.converted {{ background: #dff3e4; }}
@@ -226,6 +233,7 @@ img.trajectory {{ width: 300px; }}
 .status.failed {{ background: #f9dcdc; }}
 .status.pending {{ background: #f3f3f3; }}
 tr.failed td.error {{ color: #a01010; font-family: monospace; }}
+tr.skipped td.error {{ color: #555; }}
 .none {{ color: #999; }}
 </style>
 </head>
@@ -236,8 +244,8 @@ tr.failed td.error {{ color: #a01010; font-family: monospace; }}
 {failures}
 <table>
 <thead><tr><th>clip</th><th>captured (grey) and exaggerated (orange)</th>
-<th>fastest end effector: captured, average, exaggerated</th><th>frames</th><th>largest stretch</th>
-<th>stretch events</th><th>ground contacts</th><th>time</th></tr></thead>
+<th>fastest end effector's path: captured (grey), average (green), exaggerated (orange)</th><th>frames</th><th>largest stretch</th>
+<th>stretch events</th><th>ground contacts (times, frames)</th><th>time</th></tr></thead>
 <tbody>
 {rows}
 </tbody>

@@ -12,7 +12,7 @@ import shutil
 from html.parser import HTMLParser
 from importlib.util import find_spec
 from pathlib import Path
-from urllib.parse import unquote
+from urllib.parse import unquote, unquote_to_bytes
 
 import pytest
 
@@ -270,3 +270,64 @@ def test_the_report_opens_from_disk_in_a_browser_with_every_picture_shown(tmp_pa
             browser.close()
     assert rows == 3 and "file is empty" in failed
     assert len(shown) == 4 and all(width > 300 and height > 100 for _, width, height in shown), shown
+
+
+# ---------------------------------------------------------------------------- after a new user's trial
+
+
+def test_a_name_that_is_not_utf8_gets_a_row_and_a_working_link(tmp_path):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    odd = os.fsdecode(bytes(folder) + b"/bad\xffbyte.bvh")
+    shutil.copy(RUN, odd)
+    out = tmp_path / "out"
+    done = command("batch", folder, out, "--report", "--no-glb")
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
+    (row,) = parse(out / "index.html").rows.values()
+    assert len(row["images"]) == 2 and "bad\ufffdbyte.bvh" in row["text"]
+    for link in row["images"] + row["links"]:
+        assert os.path.isfile(os.fsencode(out) + b"/" + unquote_to_bytes(link)), link
+
+
+def test_a_clip_no_output_can_be_named_after_fails_alone(tmp_path):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    shutil.copy(RUN, folder / "run.bvh")
+    shutil.copy(RUN, folder / "._run.bvh")  # a macOS sidecar's name
+    shutil.copy(RUN, folder / ("long" * 60 + ".bvh"))
+    out = tmp_path / "out"
+    done = command("batch", folder, out, "--no-glb", "--json")
+    assert done.returncode == 1, done.stderr
+    lines = {Path(json.loads(line)["input"]).name: json.loads(line) for line in done.stdout.splitlines()}
+    assert lines["run.bvh"]["status"] == "converted"
+    assert lines["._run.bvh"]["status"] == "failed" and "._run.bvh: output name" in lines["._run.bvh"]["error"]
+    assert lines["long" * 60 + ".bvh"]["status"] == "failed" and "bytes long" in lines["long" * 60 + ".bvh"]["error"]
+
+
+def test_a_report_folder_that_is_a_file_is_refused_before_any_work(tmp_path):
+    shutil.copy(RUN, tmp_path / "run.bvh")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "report").write_text("in the way")
+    done = command("batch", tmp_path, out, "--report")
+    assert done.returncode == 2 and "report: is not a folder" in done.stderr and not (out / "run.bvh").exists()
+
+
+@needs_dask
+def test_a_refused_scheduler_leaves_no_output_folder_behind(tmp_path):
+    shutil.copy(RUN, tmp_path / "run.bvh")
+    done = command("batch", tmp_path, tmp_path / "new" / "out", "--scheduler", "tcp://127.0.0.1:1")
+    assert done.returncode == 2 and not (tmp_path / "new" / "out").exists()
+
+
+@needs_dask
+def test_a_scheduler_without_workers_is_said_not_waited_on_forever(monkeypatch):
+    from distributed import LocalCluster
+
+    from mocap_exaggerate import batch
+    from mocap_exaggerate.errors import ConfigError
+
+    monkeypatch.setattr(batch, "WAIT_FOR_WORKERS", 1.0)
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+        with pytest.raises(ConfigError, match="has no workers"):
+            batch.connect_dask(cluster.scheduler_address)
