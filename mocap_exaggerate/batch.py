@@ -575,8 +575,8 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
 def check_scheduler(scheduler: str) -> None:
     """Refuse (ConfigError) a ``scheduler`` that is neither ``local`` nor a Dask address, or Dask missing."""
     if scheduler != "local" and not re.fullmatch(r"(tcp|tls|ws|wss|inproc|ucx)://\S+", scheduler):
-        raise ConfigError(f"--scheduler {scheduler!r}: give 'local' or a Dask scheduler's address such as "
-                          "tcp://host:8786")
+        shown = repr(scheduler) if len(scheduler) <= 80 else f"{scheduler[:80]!r}... ({len(scheduler)} characters)"
+        raise ConfigError(f"--scheduler {shown}: give 'local' or a Dask scheduler's address such as tcp://host:8786")
     try:
         import distributed  # noqa: F401
     except ImportError:

@@ -19,7 +19,7 @@ from .pipeline import PipelineResult
 from .rotations import quat_rotate
 from .skinning import Skin
 
-__all__ = ["pose_skin", "render_preview", "telling_frames", "write_preview", "fastest_end", "render_trajectory", "telling_window"]
+__all__ = ["pose_skin", "render_preview", "telling_frames", "lined_up", "write_preview", "fastest_end", "render_trajectory", "telling_window"]
 
 
 def pose_skin(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray,
@@ -52,16 +52,27 @@ def _draw(ax, vertices: np.ndarray, faces: np.ndarray, axes: tuple[int, int, int
     ax.add_collection(PolyCollection(polygons, facecolors=colors, edgecolors="none"))
 
 
-def telling_frames(motion: Motion, result: PipelineResult, count: int = 4) -> list[int]:
+def lined_up(motion: Motion, result: PipelineResult, world: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """The captured world positions ``(F_out, J, 3)`` frame for frame with the output, and the
+    output's first motion frame (past the rest-pose frames it kept).
+
+    world : ``motion.world_positions()`` when the caller has it (it is not computed again)
+    """
+    world = motion.world_positions() if world is None else world
+    if result.rest_frames_dropped:  # the output starts where the motion does
+        return world[result.rest_frames:], 0
+    return world, result.rest_frames
+
+
+def telling_frames(motion: Motion, result: PipelineResult, count: int = 4, *,
+                   world: np.ndarray | None = None) -> list[int]:
     """The ``count`` output frames where the body is most exaggerated, in time order.
 
     Exaggerated by the largest distance of any joint from where it was captured, relative
     to the root (so that a body drifting as a whole does not decide), the picks at least
     an eighth of the clip apart, so that one accent does not fill the row.
     """
-    offset = result.rest_frames if result.rest_frames_dropped else 0
-    first = 0 if result.rest_frames_dropped else result.rest_frames
-    captured = motion.world_positions()[offset:]
+    captured, first = lined_up(motion, result, world)
     exaggerated = result.world_positions[:, result.original_index]
     moved = (exaggerated - exaggerated[:, :1]) - (captured - captured[:, :1])
     away = np.linalg.norm(moved, axis=-1).max(axis=1)[first:]
@@ -139,7 +150,7 @@ def _png(figure, dpi: int = 80) -> bytes:
     return buffer.getvalue()
 
 
-def fastest_end(motion: Motion, first: int | None = None) -> int:
+def fastest_end(motion: Motion, first: int | None = None, *, world: np.ndarray | None = None) -> int:
     """The end effector (hand, foot, head of the limbs found) that moves fastest in ``motion``.
 
     Fastest by the 99th percentile of its world speed from frame ``first`` on (default: past
@@ -150,7 +161,7 @@ def fastest_end(motion: Motion, first: int | None = None) -> int:
     from .limbs import find_limbs
     from .tpose import detect_rest_frames
 
-    world = motion.world_positions()
+    world = motion.world_positions() if world is None else world
     world = world[(detect_rest_frames(motion, world) if first is None else first):]
     ends = sorted({limb.end for limb in find_limbs(motion.skeleton).values()}) or list(range(motion.skeleton.num_joints))
     if len(world) < 2:
@@ -159,13 +170,12 @@ def fastest_end(motion: Motion, first: int | None = None) -> int:
     return ends[int(np.argmax(np.percentile(speed, 99, axis=0)))]
 
 
-def telling_window(motion: Motion, result: PipelineResult, joint: int, seconds: float = 3.0) -> tuple[int, int]:
+def telling_window(motion: Motion, result: PipelineResult, joint: int, seconds: float = 3.0, *,
+                   world: np.ndarray | None = None) -> tuple[int, int]:
     """Output frames ``[start, end)`` of about ``seconds`` around the moment ``joint`` is moved
     furthest from its captured path: the part of a long clip a path picture can show."""
-    offset = result.rest_frames if result.rest_frames_dropped else 0
-    first = 0 if result.rest_frames_dropped else result.rest_frames
-    captured = motion.world_positions()[offset:, joint]
-    away = np.linalg.norm(result.world_positions[:, result.original_index[joint]] - captured, axis=-1)
+    captured, first = lined_up(motion, result, world)
+    away = np.linalg.norm(result.world_positions[:, result.original_index[joint]] - captured[:, joint], axis=-1)
     total = len(away)
     width = max(int(round(seconds / motion.frame_time)), 2)
     if total - first <= width:
@@ -176,7 +186,8 @@ def telling_window(motion: Motion, result: PipelineResult, joint: int, seconds: 
 
 
 def render_trajectory(motion: Motion, result: PipelineResult, joint: int | str | None = None,
-                      config=None, frames: tuple[int, int] | None = None, dpi: int = 80) -> bytes:
+                      config=None, frames: tuple[int, int] | None = None, dpi: int = 80, *,
+                      world: np.ndarray | None = None) -> bytes:
     """A PNG of one joint's world path (default: `fastest_end`), as Kwon and Lee's Figure 3 draws it.
 
     The captured path (grey), its Gaussian average over ``extrapolate.sigma`` (green; what
@@ -195,14 +206,14 @@ def render_trajectory(motion: Motion, result: PipelineResult, joint: int | str |
     from .stages.extrapolate import gaussian_average
 
     skeleton = motion.skeleton
-    offset = result.rest_frames if result.rest_frames_dropped else 0  # the captured frames the output has
+    world = motion.world_positions() if world is None else world
     if joint is None:
-        joint = fastest_end(motion, result.rest_frames)
+        joint = fastest_end(motion, result.rest_frames, world=world)
     index = skeleton.index(joint) if isinstance(joint, str) else int(joint)
-    captured = motion.world_positions()[offset:, index]
+    captured, first = lined_up(motion, result, world)  # the rest frames the output kept are not the motion
+    captured = captured[:, index]
     exaggerated = result.world_positions[:, result.original_index[index]]
     config = config or load_preset("cartoon")
-    first = result.rest_frames - offset  # the rest frames the output kept are not part of the motion
     sigma = config.extrapolate.sigma_frames(motion.frame_time, max(len(captured) - first, 1))
     average = np.empty_like(captured)
     average[first:] = gaussian_average(captured[first:], sigma)

@@ -48,26 +48,33 @@ def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
 
     motion, result = record.captured, record.result
     paths = picture_paths(out_dir, record.outputs["manifest"])
-    joint = fastest_end(motion, result.rest_frames)
-    frames = telling_frames(motion, result, 4)
-    window = telling_window(motion, result, joint)
+    world = motion.world_positions()  # once, for every choice and picture below
+    joint = fastest_end(motion, result.rest_frames, world=world)
+    frames = telling_frames(motion, result, 4, world=world)
+    window = telling_window(motion, result, joint, world=world)
     info = {"bvh": record.manifest["outputs"]["hashes"]["bvh"], "joint": motion.skeleton.names[joint],
             "frames": frames, "window": list(window), "preview": paths["preview"].name,
             "trajectory": paths["trajectory"].name}
     write_files([(paths["preview"], render_preview(motion, result, at=frames, width=1.8, dpi=110)),
-                 (paths["trajectory"], render_trajectory(motion, result, joint, config, frames=window, dpi=100)),
+                 (paths["trajectory"], render_trajectory(motion, result, joint, config, frames=window, dpi=100,
+                                                          world=world)),
                  (paths["record"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))], overwrite=True)
     return info
 
 
 def pictures_current(out_dir: str | os.PathLike, manifest: str | os.PathLike) -> bool:
     """Whether the clip's pictures are there and were drawn from the BVH its manifest lists."""
-    paths = picture_paths(out_dir, manifest)
-    info, listed = _read_json(paths["record"]), _read_json(Path(manifest))
+    return _current_record(picture_paths(out_dir, manifest), _read_json(Path(manifest))) is not None
+
+
+def _current_record(paths: dict[str, Path], listed: dict | None) -> dict | None:
+    """The pictures' record when they are there and were drawn from the BVH the manifest ``listed`` lists."""
+    info = _read_json(paths["record"])
     if info is None or listed is None:
-        return False
+        return None
     bvh = listed.get("outputs", {}).get("hashes", {}).get("bvh")
-    return bvh is not None and info.get("bvh") == bvh and paths["preview"].is_file() and paths["trajectory"].is_file()
+    current = bvh is not None and info.get("bvh") == bvh and paths["preview"].is_file() and paths["trajectory"].is_file()
+    return info if current else None
 
 
 def check_report(out_dir: str | os.PathLike) -> None:
@@ -139,7 +146,7 @@ def _row(out_dir: Path, result, number: int) -> str:
     pictures = '<td class="none" colspan="2">no pictures</td>'
     if manifest_path:
         paths = picture_paths(out_dir, manifest_path)
-        info = _read_json(paths["record"]) if pictures_current(out_dir, manifest_path) else None
+        info = _current_record(paths, listed)
         if info is not None:
             pictures = (f'<td><a href="{_href(out_dir, paths["preview"])}"><img loading="lazy" alt="captured and '
                         f'exaggerated poses of {name}" src="{_href(out_dir, paths["preview"])}" class="preview"></a></td>'

@@ -83,6 +83,7 @@ def test_the_library_runs_a_batch_on_dask_and_resumes(tmp_path):
 @needs_dask
 @pytest.mark.parametrize("address, says", [
     ("foo", "give 'local' or a Dask scheduler's address"),
+    ("tcp" * 2000, "... (6000 characters): give 'local'"),  # a pasted log is cut short in the message
     ("tcp://127.0.0.1:1", "cannot reach the Dask scheduler"),
 ])
 def test_a_scheduler_that_is_not_there_is_a_usage_error(tmp_path, address, says):
@@ -210,14 +211,16 @@ def test_pictures_drawn_from_other_outputs_are_not_shown_and_resume_redraws_them
     assert len(row["images"]) == 2
 
 
-def test_the_report_never_replaces_a_page_it_did_not_write(tmp_path):
+@pytest.mark.parametrize("name, says", [("index.html", "is not a batch report"),  # the studio's own page
+                                        ("report", "report: is not a folder")])   # where the pictures go
+def test_the_report_never_replaces_what_it_did_not_write(tmp_path, name, says):
     shutil.copy(RUN, tmp_path / "run.bvh")
     out = tmp_path / "out"
     out.mkdir()
-    (out / "index.html").write_text("<html>the studio's own page</html>")
+    (out / name).write_text("<html>the studio's own page</html>")
     done = command("batch", tmp_path, out, "--report")
-    assert done.returncode == 2 and "is not a batch report" in done.stderr
-    assert (out / "index.html").read_text() == "<html>the studio's own page</html>" and not (out / "run.bvh").exists()
+    assert done.returncode == 2 and says in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    assert (out / name).read_text() == "<html>the studio's own page</html>" and not (out / "run.bvh").exists()
 
 
 def test_an_interrupted_batch_reports_what_did_not_start(tmp_path):
@@ -302,15 +305,6 @@ def test_a_clip_no_output_can_be_named_after_fails_alone(tmp_path):
     assert lines["run.bvh"]["status"] == "converted"
     assert lines["._run.bvh"]["status"] == "failed" and "._run.bvh: output name" in lines["._run.bvh"]["error"]
     assert lines["long" * 60 + ".bvh"]["status"] == "failed" and "bytes long" in lines["long" * 60 + ".bvh"]["error"]
-
-
-def test_a_report_folder_that_is_a_file_is_refused_before_any_work(tmp_path):
-    shutil.copy(RUN, tmp_path / "run.bvh")
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "report").write_text("in the way")
-    done = command("batch", tmp_path, out, "--report")
-    assert done.returncode == 2 and "report: is not a folder" in done.stderr and not (out / "run.bvh").exists()
 
 
 @needs_dask
