@@ -8,6 +8,11 @@ beyond its own conversion (worker start-up and imports, handing work out, report
 ``(wall x workers - sum of per-file seconds) / files``. ``--dask`` adds a run on a Dask
 LocalCluster of as many workers; ``--report`` draws the report's pictures in every run.
 
+It also prints the machine's own ceiling: the same conversions run in one process
+alone, then in ``--jobs`` independent processes at once (no pool, no hand-out, nothing
+shared). On a virtual machine two "cores" may not give two cores' work; the pool's
+speed-up is to be read against that.
+
 Not a test: run it by hand (``python bench/batch.py``) and quote the figures.
 """
 
@@ -44,6 +49,32 @@ def run(folder: Path, out: Path, jobs: int, extra: list[str]) -> tuple[float, li
     return wall, [json.loads(line) for line in done.stdout.splitlines()]
 
 
+_SOLO = """
+import sys, tempfile, time
+from mocap_exaggerate.job import convert
+clips = sys.argv[1:]
+with tempfile.TemporaryDirectory() as out:
+    convert(clips[0], out, overwrite=True)  # warm
+    start = time.perf_counter()
+    for clip in clips:
+        convert(clip, out, overwrite=True)
+    print(time.perf_counter() - start)
+"""
+
+
+def ceiling(clips: list[Path], jobs: int, rounds: int = 3) -> tuple[float, float, float]:
+    """Seconds for ``clips`` converted in one process alone, and in ``jobs`` processes at once
+    (each converting all of them); the speed-up those ``jobs`` processes give (best of ``rounds``)."""
+    command = [sys.executable, "-c", _SOLO, *map(str, clips)]
+    alone, together = [], []
+    for _ in range(rounds):
+        alone.append(float(subprocess.run(command, capture_output=True, text=True, check=True).stdout))
+        running = [subprocess.Popen(command, stdout=subprocess.PIPE, text=True) for _ in range(jobs)]
+        together.append(max(float(p.communicate()[0]) for p in running))
+    best_alone, best_together = min(alone), min(together)
+    return best_alone, best_together, jobs * best_alone / best_together
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--copies", type=int, default=2, help="copies of each clip (default 2)")
@@ -51,6 +82,7 @@ def main() -> None:
     parser.add_argument("--no-glb", action="store_true", help="BVH and manifest only")
     parser.add_argument("--dask", action="store_true", help="also on a Dask LocalCluster of --jobs workers")
     parser.add_argument("--report", action="store_true", help="with --report (the pictures of every clip)")
+    parser.add_argument("--no-ceiling", action="store_true", help="skip measuring the machine's own speed-up")
     args = parser.parse_args()
     extra = (["--no-glb"] if args.no_glb else []) + (["--report"] if args.report else [])
     with tempfile.TemporaryDirectory() as tmp:
@@ -85,6 +117,10 @@ def main() -> None:
             same = all((first / p.relative_to(first)).read_bytes() == (out / p.relative_to(first)).read_bytes()
                        for p in first.rglob("*") if p.is_file() and p.suffix != ".json")
             print(f"\noutputs byte-identical serial vs {engine} (manifests aside, whose timings differ): {same}")
+        if not args.no_ceiling:
+            alone, together, speedup = ceiling(clips(), args.jobs)
+            print(f"\nthis machine's ceiling: the {files // args.copies} clips in one process {alone:.2f} s; in "
+                  f"{args.jobs} processes at once (each all of them) {together:.2f} s: {speedup:.2f}x")
 
 
 if __name__ == "__main__":
