@@ -161,6 +161,11 @@ def pipeline_options(func: Callable) -> Callable:
         click.option("--tpose", type=click.Choice(["auto", "keep", "drop"]), default=None,
                      help="Leading synthetic rest pose: auto (keep out of filters, unchanged), keep, drop."),
         click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time."),
+        click.option("--root-offset", "root_offset", type=click.Choice(["auto", "replace", "add"]), default=None,
+                     help="Position channels replace the joint's OFFSET (most exporters) or add to it "
+                          "(Reallusion/iClone, MakeHuman); auto tells them apart. Default auto."),
+        click.option("--up", type=click.Choice(["auto", "x", "y", "z"]), default=None,
+                     help="The axis the body stands along; auto: from the rest pose. Default auto."),
     ]
     for option in reversed(options):
         func = option(func)
@@ -193,6 +198,7 @@ def _overrides(p: dict[str, Any]) -> dict[str, Any]:
     }
     pairs = [
         ("input", "tpose", p["tpose"]), ("input", "fps", p["fps"]),
+        ("input", "root_offset", p["root_offset"]), ("input", "up", p["up"]),
         ("extrapolate", "enabled", p["extrapolate_on"]), ("extrapolate", "sigma", p["sigma"]),
         ("extrapolate", "omega", p["omega"]),
         ("correct", "enabled", p["correct_on"]), ("correct", "threshold", p["threshold"]),
@@ -650,10 +656,15 @@ def _given_options(ctx: click.Context, exclude: set[str]) -> list[str]:
 @click.option("--groups", is_flag=True, help="Also list the rubber-joint groups and the joints that ride rigidly.")
 @click.option("--contacts", is_flag=True, help="Also list where the end effectors touch the ground (frames).")
 @click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time.")
+@click.option("--root-offset", "root_offset", type=click.Choice(["auto", "replace", "add"]), default="auto",
+              show_default=True, help="Position channels replace the joint's OFFSET or add to it (iClone, MakeHuman).")
+@click.option("--up", type=click.Choice(["auto", "x", "y", "z"]), default="auto", show_default=True,
+              help="The axis the body stands along.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
 @verbosity_options
 @_fail_cleanly
-def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float | None, as_json: bool) -> None:
+def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float | None, root_offset: str, up: str,
+         as_json: bool) -> None:
     """Describe a clip: joints, channels, rotation orders, frames, fps, duration, height.
 
     \b
@@ -663,14 +674,18 @@ def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float
     from mocap_exaggerate.job import describe
 
     label = "<stdin>" if str(input_path) == "-" else str(input_path)
-    data = describe(input_path, fps=fps, limbs=limbs, groups=groups, contacts=contacts, label=label)
+    data = describe(input_path, fps=fps, limbs=limbs, groups=groups, contacts=contacts, label=label,
+                    root_offset=root_offset, up=up)
     orders = data["rotation_orders"]
     if as_json:
         click.echo(json.dumps(data, indent=2))
         return
     click.echo(f"{label}")
     click.echo(f"  joints      {data['joints']} (+{data['end_sites']} End Sites), root {data['root']}")
-    click.echo(f"  channels    {data['channels']}; position channels on {', '.join(data['position_channel_joints']) or 'none'}")
+    added = " (added to the OFFSET: --root-offset add)" if data["root_offset"] == "add" else ""
+    click.echo(f"  channels    {data['channels']}; position channels on "
+               f"{', '.join(data['position_channel_joints'][:6]) or 'none'}"
+               f"{' ...' if len(data['position_channel_joints']) > 6 else ''}{added}")
     click.echo(f"  rotation    {', '.join(f'{o} x{n}' for o, n in orders.items())}")
     click.echo(f"  frames      {data['frames']} at {data['fps']:g} fps ({data['duration_s']:.3f} s)")
     click.echo(f"  height      {data['height']:g} units along {data['up_axis']} (rest pose)")

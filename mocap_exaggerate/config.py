@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError, check_number
-from .io.bvh import FPS_RANGE
+from .io.bvh import FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES
 from .stages.contacts import ContactConfig, TargetSpec
 from .stages.correct import CorrectConfig
 from .stages.extrapolate import ExtrapolateConfig
@@ -50,16 +50,25 @@ class InputConfig:
         every filter and writes it back unchanged; ``keep`` treats it as
         motion; ``drop`` removes it from the output.
     fps : frame rate overriding the header's ``Frame Time`` (None keeps it).
+    root_offset : position channels ``replace`` the OFFSET (most exporters), ``add``
+        to it (Reallusion/iClone, MakeHuman), or ``auto``: told apart per clip.
+    up : the axis the body stands along, ``x``, ``y``, ``z``, or ``auto`` (from the rest pose).
     """
 
     tpose: str = "auto"
     fps: float | None = None
+    root_offset: str = "auto"
+    up: str = "auto"
 
     def __post_init__(self) -> None:
         if self.tpose not in _TPOSE_MODES:
             raise ConfigError(f"input.tpose must be one of {', '.join(_TPOSE_MODES)}, got {self.tpose!r}")
         if self.fps is not None:
             check_number("input.fps", self.fps, *FPS_RANGE)
+        if self.root_offset not in ROOT_OFFSET_MODES:
+            raise ConfigError(f"input.root_offset must be one of {', '.join(ROOT_OFFSET_MODES)}, got {self.root_offset!r}")
+        if self.up not in UP_AXES:
+            raise ConfigError(f"input.up must be one of {', '.join(UP_AXES)}, got {self.up!r}")
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -250,7 +250,8 @@ def convert(
                                        path_file=path_file)
 
     timings: dict[str, float] = {}
-    motion, report = read_bvh(data, name=label, fps=config.input.fps)
+    motion, report = read_bvh(data, name=label, fps=config.input.fps, root_offset=config.input.root_offset,
+                              up=config.input.up)
     timings["read"] = time.perf_counter() - started
     result = run(motion, config, paths=paths)
     timings.update(result.timings)
@@ -360,9 +361,10 @@ def _timed(func, *args):
 
 
 def describe(source: Source, *, fps: float | None = None, limbs: bool = False, groups: bool = False,
-             contacts: bool = False, label: str | None = None) -> dict[str, Any]:
+             contacts: bool = False, label: str | None = None, root_offset: str = "auto",
+             up: str = "auto") -> dict[str, Any]:
     """What ``info`` shows about a clip, as plain data (JSON-ready)."""
-    motion, report = read_bvh(source, name=label, fps=fps)
+    motion, report = read_bvh(source, name=label, fps=fps, root_offset=root_offset, up=up)
     skeleton = motion.skeleton
     orders: dict[str, int] = {}
     for j in range(skeleton.num_joints):
@@ -381,6 +383,7 @@ def describe(source: Source, *, fps: float | None = None, limbs: bool = False, g
         "fps": round(motion.fps, 6),
         "duration_s": round(motion.duration, 6),
         "up_axis": "XYZ"[skeleton.up_axis()],
+        "root_offset": report.root_offset,
         "height": round(skeleton.height(), 4),
         "rest_frames": detect_rest_frames(motion),
         "warnings": report.warnings,

@@ -21,7 +21,7 @@ import numpy as np
 
 from .skeleton import Skeleton
 
-__all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints", "limb_length"]
+__all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints", "limb_length", "standing_up"]
 
 LIMB_NAMES = ("left_arm", "right_arm", "left_leg", "right_leg", "spine", "neck")
 
@@ -195,3 +195,21 @@ def limb_length(skeleton: Skeleton, limb: Limb) -> float:
     """A limb's full length: the rest lengths of its links, base to end."""
     lengths = skeleton.link_lengths()
     return float(sum(lengths[j] for j in limb.joints[1:]))
+
+
+def standing_up(skeleton: Skeleton, world: np.ndarray) -> tuple[int, float]:
+    """The axis the body stands along (`Skeleton.up_axis`) and its sign: +1 when the head
+    is above the feet along it over most of the clip, -1 when below.
+
+    world : (F, J, 3) the clip's world positions (a sample of frames will do).
+    Read from the motion, not the rest pose: some rigs (Reallusion) rest with the
+    legs pointing up and are turned upright by the root's rotation in every frame.
+    """
+    axis = skeleton.up_axis()
+    limbs = find_limbs(skeleton)
+    top = limbs["neck"].end if "neck" in limbs else limbs["spine"].end if "spine" in limbs else None
+    feet = [limbs[n].end for n in ("left_leg", "right_leg") if n in limbs]
+    if top is None or not feet:
+        return axis, 1.0
+    height = np.median(world[:, top, axis] - world[:, feet, axis].mean(axis=1))
+    return axis, -1.0 if height < 0 else 1.0

@@ -179,7 +179,11 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
         raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
     scale, how = unit_scale(units, motion.skeleton.height())
     bound = output_skin(motion, result, base_skin(motion, result, skin), influences)
-    glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=output_thickness(result))
+    from .limbs import standing_up
+
+    step = max(motion.num_frames // 64, 1)  # a sample of the clip tells which way is up
+    up = standing_up(motion.skeleton, motion.slice(slice(None, None, step)).world_positions())
+    glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=output_thickness(result), up=up)
     weights = npz_bytes(joint_names=np.array(bound.joint_names), joints=bound.joints, weights=bound.weights,
                         vertices=bound.vertices, faces=bound.faces)
     return glb, weights, how

@@ -13,6 +13,8 @@ __all__ = ["Skeleton", "POSITION_CHANNELS", "ROTATION_CHANNELS"]
 
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
+#: What a joint's position channels do to its OFFSET.
+POSITION_MODES = ("replace", "add")
 
 
 @dataclass(frozen=True, eq=False)
@@ -27,6 +29,9 @@ class Skeleton:
     channels : tuple of J tuples of BVH channel names as read, e.g.
         ``("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")``
     end_sites : (J, 3) float64, End Site offset of each joint, NaN where a joint has none
+    positions : ``replace`` when a joint's position channels replace its OFFSET (bvhio,
+        Blender, most readers); ``add`` when they add to it (Reallusion/iClone, MakeHuman)
+    up : the axis (0, 1, 2) the body stands along when it was given; None: `up_axis` works it out
     """
 
     names: tuple[str, ...]
@@ -34,6 +39,8 @@ class Skeleton:
     offsets: np.ndarray
     channels: tuple[tuple[str, ...], ...]
     end_sites: np.ndarray
+    positions: str = "replace"
+    up: int | None = None
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -48,6 +55,10 @@ class Skeleton:
             )
         if len(self.channels) != n:
             raise ValueError(f"skeleton has {n} joints but {len(self.channels)} channel lists")
+        if self.positions not in POSITION_MODES:
+            raise ValueError(f"positions must be one of {', '.join(POSITION_MODES)}, got {self.positions!r}")
+        if self.up not in (None, 0, 1, 2):
+            raise ValueError(f"up must be None, 0, 1 or 2, got {self.up!r}")
         if n == 0 or parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, n)):
             raise ValueError("parents must start with the root (-1) and list every parent before its children")
         for array in (parents, offsets, end_sites):
@@ -123,7 +134,7 @@ class Skeleton:
             POSITION_CHANNELS + tuple(f"{a}rotation" for a in self.rotation_order(j))
             for j in range(self.num_joints)
         )
-        return Skeleton(self.names, self.parents, self.offsets, channels, self.end_sites)
+        return Skeleton(self.names, self.parents, self.offsets, channels, self.end_sites, self.positions, self.up)
 
     # ------------------------------------------------------------------ geometry
     def rest_positions(self) -> np.ndarray:
@@ -140,8 +151,10 @@ class Skeleton:
         """Index (0, 1, 2) of the axis the body stands along in the rest pose.
 
         Legs and spine together are longer than the arms, so the axis that
-        carries most of the summed link length is taken as up.
+        carries most of the summed link length is taken as up (unless it was given: ``up``).
         """
+        if self.up is not None:
+            return self.up
         return int(np.argmax(np.abs(self.offsets[1:]).sum(axis=0)))
 
     def height(self) -> float:

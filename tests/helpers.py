@@ -113,3 +113,41 @@ def skinned_vertices(glb: bytes, frame: int, result, meters: float):
     local = positions[:, None, :] + ibm[joints, :3, 3]
     moved = quat_rotate(result.world_rotations[frame][joints], local) + result.world_positions[frame][joints] * meters
     return np.sum(weights[..., None] * moved, axis=1), weights
+
+
+def glb_joint_positions(glb: bytes, frame: int) -> dict[str, np.ndarray]:
+    """Every joint node's world position at ``frame`` in the GLB's own frame (Y up, metres),
+    by walking its nodes' rest transforms and animation keys: what any glTF viewer computes."""
+    from mocap_exaggerate.rotations import quat_mul
+
+    gltf = pygltflib.GLTF2.load_from_bytes(glb)
+    blob = gltf.binary_blob()
+
+    def read(index):
+        accessor = gltf.accessors[index]
+        view = gltf.bufferViews[accessor.bufferView]
+        width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4}[accessor.type]
+        return np.frombuffer(blob, np.float32, accessor.count * width, view.byteOffset).reshape(accessor.count, width)
+
+    nodes = gltf.nodes
+    trs = {k: [np.array(n.translation or [0, 0, 0], float), np.array(n.rotation or [0, 0, 0, 1], float),
+               np.array(n.scale or [1, 1, 1], float)] for k, n in enumerate(nodes)}
+    for channel in gltf.animations[0].channels:
+        values = read(gltf.animations[0].samplers[channel.sampler].output)[frame].astype(float)
+        slot = {"translation": 0, "rotation": 1, "scale": 2}[channel.target.path]
+        trs[channel.target.node][slot] = values
+    parent = {child: k for k, n in enumerate(nodes) for child in (n.children or [])}
+    world: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def place(k):
+        if k not in world:
+            t, r, s = trs[k]
+            if k in parent:
+                pt, pr, ps = place(parent[k])
+                world[k] = (pt + quat_rotate(pr, ps * t), quat_mul(pr, r), ps * s)
+            else:
+                world[k] = (t, r, s)
+        return world[k]
+
+    joints = gltf.skins[0].joints
+    return {nodes[k].name: place(k)[0] for k in joints}

@@ -96,3 +96,29 @@ def test_blender_imports_the_glb_and_deforms_the_mesh_as_we_do(clip, tmp_path):
         # and it really moves: the mesh at the two frames differs.
     first, second = (np.array(seen["meshes"][str(f)]) for f in frames)
     assert np.abs(first - second).max() > 0.05
+
+
+@needs_blender
+def test_blender_stands_a_z_up_clip_upright_on_the_floor(tmp_path):
+    """A Z-up clip (MakeHuman's zombie walk, `info`: height along Z): Blender imports its GLB standing
+    on glTF's +Y, head well above the feet, the body's lowest point on the floor."""
+    from mocap_exaggerate.io.gltf import unit_scale
+    from mocap_exaggerate.job import convert
+
+    from .helpers import shared
+
+    clip = shared("makehuman_zombie_walk_keyframed.bvh")
+    record = convert(clip, tmp_path)
+    motion, _ = read_bvh(clip)
+    assert motion.skeleton.up_axis() == 2
+    frames = [0, 10, 20, 30]
+    done = subprocess.run([BPY, str(GLB_SCRIPT), str(record.outputs["glb"]), str(motion.fps), *map(str, frames)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    seen = json.loads(next(l for l in done.stdout.splitlines() if l.startswith("JSON:"))[5:])
+    height = motion.skeleton.height() * unit_scale("auto", motion.skeleton.height())[0]
+    for frame in map(str, frames):
+        heads, mesh = seen["heads"][frame], np.array(seen["meshes"][frame])
+        assert heads["Head"][1] > max(heads["Foot_L"][1], heads["Foot_R"][1]) + 0.6 * height, frame
+        assert abs(mesh[:, 1].min()) < 0.02 * height, (frame, mesh[:, 1].min(), height)
+        assert mesh[:, 1].max() > 0.85 * height, frame

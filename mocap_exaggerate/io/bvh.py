@@ -7,7 +7,11 @@ count the values on each line, and the numbers are converted in one call.
 Writing formats whole blocks of frames with one ``%`` operation.
 
 Position channels replace the joint's OFFSET (the convention of bvhio,
-Blender and most readers); joints without them use the OFFSET.
+Blender and most readers) or add to it (Reallusion/iClone and MakeHuman
+exports): ``root_offset="auto"`` tells the two apart (`position_mode`), the
+skeleton remembers which (``Skeleton.positions``) and the writer keeps it, so
+a clip goes back out in its own convention. Joints without position channels
+use the OFFSET.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ import logging
 import os
 import re
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
@@ -51,6 +55,10 @@ FPS_RANGE = (1.0, 10000.0)
 MAX_DEPTH = 1000
 MAX_JOINTS = 10000
 
+#: How position channels are read (see `read_bvh`), and the up axes one can give.
+ROOT_OFFSET_MODES = ("auto", "replace", "add")
+UP_AXES = ("auto", "x", "y", "z")
+
 _MOTION_RE = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE | re.IGNORECASE)
 _FRAMES_RE = re.compile(r"^\s*Frames\s*:\s*(\S*)\s*$", re.IGNORECASE)
 _FRAME_TIME_RE = re.compile(r"^\s*Frame\s+Time\s*:\s*(\S*)\s*$", re.IGNORECASE)
@@ -68,6 +76,7 @@ class BVHReport:
     declared_frames: int = 0
     data_lines: int = 0
     header_fps: float = 0.0
+    root_offset: str = "replace"
     warnings: list[str] = field(default_factory=list)
 
 
@@ -79,6 +88,8 @@ def read_bvh(
     *,
     name: str | None = None,
     fps: float | None = None,
+    root_offset: str = "auto",
+    up: str = "auto",
 ) -> tuple[Motion, BVHReport]:
     """Read a BVH clip.
 
@@ -88,6 +99,10 @@ def read_bvh(
     name : how to call the source in messages (defaults to the path)
     fps : frame rate that overrides the header's ``Frame Time`` (some
         exporters write a wrong one)
+    root_offset : ``replace``: position channels replace the joint's OFFSET;
+        ``add``: they add to it; ``auto``: `position_mode` decides
+    up : ``x``, ``y`` or ``z``: the axis the body stands along; ``auto``:
+        worked out from the rest pose (`Skeleton.up_axis`)
 
     Returns
     -------
@@ -99,6 +114,11 @@ def read_bvh(
     InputError
         with ``file:line: problem`` for anything malformed.
     """
+    if root_offset not in ROOT_OFFSET_MODES:
+        raise InputError(f"root_offset must be one of {', '.join(ROOT_OFFSET_MODES)}, got {root_offset!r}",
+                         source="root_offset")
+    if up not in UP_AXES:
+        raise InputError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}", source="up")
     data, label = read_source(source, name)
     report = BVHReport(source=label)
     if b"\x00" in data[:4096]:
@@ -172,8 +192,66 @@ def read_bvh(
         if report.header_fps and abs(report.header_fps - fps) > 1e-6 * fps:
             report.warnings.append(f"frame rate set to {fps:g} fps (header says {report.header_fps:g})")
         frame_time = 1.0 / fps
+    if up != "auto":
+        skeleton = replace(skeleton, up="xyz".index(up))
+    if root_offset == "auto":
+        root_offset = position_mode(skeleton, values)
+    if root_offset != skeleton.positions:
+        skeleton = replace(skeleton, positions=root_offset)
+    report.root_offset = root_offset
     motion = _motion_from_channels(skeleton, values, frame_time)
     return motion, report
+
+
+def position_mode(skeleton: Skeleton, values: np.ndarray) -> str:
+    """``add`` when the position channels of a clip (``values``, ``(F, C)``) are displacements
+    from the joints' OFFSETs, ``replace`` when they are the positions themselves.
+
+    Two signatures of ``add``. Joints below the root with position channels whose
+    values stay small beside their OFFSETs (MakeHuman writes six channels on every
+    joint, mostly zeros): replaced, every such bone would shrink to nothing. And a
+    root OFFSET of about the hips' height with root channels near zero (Reallusion):
+    replaced, the body stands about its hip height below the floor; added, on it.
+    """
+    columns = _position_columns(skeleton)
+    if not columns:
+        return "replace"
+    height = skeleton.height()
+    below = [j for j in columns if j != 0 and np.linalg.norm(skeleton.offsets[j]) > 1e-3 * height]
+    if below:
+        small = [np.median(np.linalg.norm(_filled(values, columns[j]), axis=1)) < 0.25 * np.linalg.norm(skeleton.offsets[j])
+                 for j in below]
+        return "add" if sum(small) * 2 > len(small) else "replace"
+    if 0 not in columns:
+        return "replace"
+    up = skeleton.up_axis()
+    lift = skeleton.offsets[0, up]
+    if abs(lift) < 0.25 * height:
+        return "replace"
+    frames = np.unique(np.linspace(0, len(values) - 1, min(len(values), 64)).astype(int))
+    sample = _motion_from_channels(replace(skeleton, positions="replace"), values[frames], 1.0)
+    floor = float(np.median(sample.world_positions()[..., up].min(axis=1)))  # where the feet are, replaced
+    return "add" if abs(floor + lift) < abs(floor) else "replace"
+
+
+def _position_columns(skeleton: Skeleton) -> dict[int, list[tuple[int, int]]]:
+    """For each joint with position channels, its (column, axis) pairs."""
+    columns: dict[int, list[tuple[int, int]]] = {}
+    column = 0
+    for j, names in enumerate(skeleton.channels):
+        for name in names:
+            if name in POSITION_CHANNELS:
+                columns.setdefault(j, []).append((column, "XYZ".index(name[0])))
+            column += 1
+    return columns
+
+
+def _filled(values: np.ndarray, pairs: list[tuple[int, int]]) -> np.ndarray:
+    """``(F, 3)`` the channel values of one joint's position channels, 0 on axes it has none for."""
+    out = np.zeros((len(values), 3))
+    for column, axis in pairs:
+        out[:, axis] = values[:, column]
+    return out
 
 
 def check_fps(fps: float, source: str = "fps") -> None:
@@ -475,6 +553,7 @@ def _motion_from_channels(skeleton: Skeleton, values: np.ndarray, frame_time: fl
     frames = values.shape[0]
     joints = skeleton.num_joints
     local_pos = np.broadcast_to(skeleton.offsets, (frames, joints, 3)).copy()
+    adds = skeleton.positions == "add"
     euler = np.zeros((frames, joints, 3))
     column = 0
     by_order: dict[str, list[int]] = {}
@@ -484,7 +563,7 @@ def _motion_from_channels(skeleton: Skeleton, values: np.ndarray, frame_time: fl
         for name in names:
             axis = "XYZ".index(name[0])
             if name in POSITION_CHANNELS:
-                local_pos[:, j, axis] = values[:, column]
+                local_pos[:, j, axis] = values[:, column] + (skeleton.offsets[j, axis] if adds else 0.0)
             else:
                 euler[:, j, order.index(name[0])] = values[:, column]
             column += 1
@@ -531,6 +610,8 @@ def _channel_blocks(motion: Motion, block: int):
         part = slice(start, min(start + block, frames))
         values = np.empty((part.stop - part.start, len(source)))
         values[:, ~source] = motion.local_positions[part][:, joint[~source], component[~source]]
+        if skeleton.positions == "add":  # the file's own convention: displacements from the OFFSETs
+            values[:, ~source] -= skeleton.offsets[joint[~source], component[~source]]
         values[:, source] = euler[part][:, joint[source], component[source]]
         yield values
 

@@ -20,10 +20,10 @@ import pygltflib as gl
 
 from ..errors import ConfigError
 from ..motion import Motion
-from ..rotations import quat_unroll
+from ..rotations import quat_mul, quat_rotate, quat_unroll
 from ..skinning import Skin
 
-__all__ = ["UNITS", "unit_scale", "format_glb", "glb_pieces", "vertex_normals"]
+__all__ = ["UNITS", "UPRIGHT", "unit_scale", "format_glb", "glb_pieces", "vertex_normals"]
 
 #: Metres per unit.
 UNITS = {"m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048, "cmu": 0.0254 / 0.45}
@@ -157,8 +157,22 @@ def format_glb(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
     return b"".join(glb_pieces(motion, skin, meters_per_unit=meters_per_unit, name=name, thickness=thickness))
 
 
+#: glTF's up is +Y and its front +Z. The turn (x, y, z, w) that stands a clip whose body stands
+#: along (axis, sign) on +Y, about the other horizontal axis, so a Z-up clip's -Y front (Blender's,
+#: 3ds Max's, MakeHuman's) becomes +Z, as Blender's own glTF exporter turns it.
+_HALF = float(np.sqrt(0.5))
+UPRIGHT = {
+    (1, 1.0): (0.0, 0.0, 0.0, 1.0),
+    (2, 1.0): (-_HALF, 0.0, 0.0, _HALF),
+    (2, -1.0): (_HALF, 0.0, 0.0, _HALF),
+    (0, 1.0): (0.0, 0.0, _HALF, _HALF),
+    (0, -1.0): (0.0, 0.0, -_HALF, _HALF),
+    (1, -1.0): (0.0, 0.0, 1.0, 0.0),
+}
+
+
 def glb_pieces(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name: str = "mocap_exaggerate",
-               thickness: np.ndarray | None = None) -> list[bytes]:
+               thickness: np.ndarray | None = None, up: tuple[int, float] = (1, 1.0)) -> list[bytes]:
     """The GLB as consecutive pieces of bytes, to be written one after the other.
 
     motion : the output Motion (its skeleton is the one the skin is bound to)
@@ -168,6 +182,10 @@ def glb_pieces(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
         scales with each child's translation divided by its parent's world
         scale, so every joint stays exactly where the BVH puts it and children
         are never sheared; the mesh around a thinner joint shrinks about it.
+    up : the axis the clip's body stands along and its sign (`limbs.standing_up`).
+        glTF is +Y up: another up is turned onto +Y (`UPRIGHT`) in the root
+        joint, its rest and its tracks, and in the mesh, so the file stands on
+        +Y with no extra node, and every joint below the root is unchanged.
     """
     skeleton = motion.skeleton
     index = {n: j for j, n in enumerate(skeleton.names)}
@@ -179,12 +197,22 @@ def glb_pieces(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
     gltf.scene = 0
     buffer = _Buffer(gltf)
 
-    # Joint nodes, rest pose: translation = offset, no rotation.
+    try:
+        upright = np.array(UPRIGHT[(int(up[0]), float(up[1]))])
+    except KeyError:
+        raise ConfigError(f"up must be an axis 0, 1 or 2 and a sign 1 or -1, got {up!r}") from None
+    turned = not np.array_equal(upright, UPRIGHT[(1, 1.0)])
+    turn = quat_rotate(upright, np.eye(3)).T  # the matrix: column i is where axis i goes
+
+    # Joint nodes, rest pose: translation = offset, no rotation (the root: turned upright).
     children = [[] for _ in range(skeleton.num_joints)]
     for j in range(1, skeleton.num_joints):
         children[skeleton.parents[j]].append(j)
     for j in range(skeleton.num_joints):
-        node = gl.Node(name=skeleton.names[j], translation=[float(v) * scale for v in skeleton.offsets[j]])
+        offset = turn @ skeleton.offsets[j] if j == 0 else skeleton.offsets[j]
+        node = gl.Node(name=skeleton.names[j], translation=[float(v) * scale for v in offset])
+        if j == 0 and turned:
+            node.rotation = [float(v) for v in upright]
         if children[j]:
             node.children = children[j]
         gltf.nodes.append(node)
@@ -195,13 +223,14 @@ def glb_pieces(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
     rest = skeleton.rest_positions() * scale
     inverse_bind = np.zeros((skeleton.num_joints, 4, 4), dtype=np.float32)
     inverse_bind[:] = np.eye(4, dtype=np.float32)
+    inverse_bind[:, :3, :3] = turn.T  # every joint's rest frame is the root's turn; its inverse
     inverse_bind[:, :3, 3] = -rest
     # glTF matrices are column-major: store the transpose row by row.
     ibm = buffer.add(inverse_bind.transpose(0, 2, 1).reshape(-1, 16), "MAT4", gl.FLOAT)
     gltf.skins.append(gl.Skin(joints=list(range(skeleton.num_joints)), inverseBindMatrices=ibm, skeleton=0))
 
-    positions = (skin.vertices * scale).astype(np.float32)
-    normals = vertex_normals(skin.vertices, skin.faces).astype(np.float32)
+    positions = (skin.vertices @ turn.T * scale).astype(np.float32)
+    normals = (vertex_normals(skin.vertices, skin.faces) @ turn.T).astype(np.float32)
     remap = np.array([index[n] for n in skin.joint_names], dtype=np.int64)
     sets = 2 if skin.weights.shape[1] > 4 else 1  # 8 influences need a second JOINTS/WEIGHTS pair
     columns = 4 * sets
@@ -240,9 +269,13 @@ def glb_pieces(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
     samplers, channels = [], []
     for j in range(skeleton.num_joints):
         # Joint by joint: float32 tracks made one at a time keep long clips' memory flat.
-        rotation = quat_unroll(motion.local_rotations[:, j], axis=0)
-        rotation = (rotation / np.linalg.norm(rotation, axis=-1, keepdims=True)).astype(np.float32)
+        rotation = motion.local_rotations[:, j]
         translation = motion.local_positions[:, j] * scale
+        if j == 0 and turned:
+            rotation = quat_mul(upright, rotation)
+            translation = translation @ turn.T
+        rotation = quat_unroll(rotation, axis=0)
+        rotation = (rotation / np.linalg.norm(rotation, axis=-1, keepdims=True)).astype(np.float32)
         if parent_world is not None:
             translation = translation / parent_world[:, j, None]
         tracks = [("translation", translation.astype(np.float32), "VEC3"), ("rotation", rotation, "VEC4")]

@@ -297,7 +297,8 @@ def build_hierarchy(skeleton: Skeleton, config: SubjointConfig | None = None) ->
         link_child.append(j)
         link_parent.append(int(skeleton.parents[j]))
         fraction.append(1.0)
-    sub = Skeleton(tuple(names), np.array(parents), np.array(offsets), tuple(channels), np.array(end_sites))
+    sub = Skeleton(tuple(names), np.array(parents), np.array(offsets), tuple(channels), np.array(end_sites),
+                   skeleton.positions, skeleton.up)
     return SubjointHierarchy(
         sub, original, np.array(link_child), np.array(link_parent), np.array(fraction), rigid, groups
     )

@@ -2,8 +2,9 @@
 
     python read_glb.py FILE.glb FPS FRAME [FRAME ...]
 
-Prints {"bones": N, "frame_range": [a, b], "vertices": V, "fps": f, "meshes": {frame: [[x, y, z], ...]}}
-with the deformed (evaluated) mesh in glTF's Y-up axes, frames counted from 0.
+Prints {"bones": N, "frame_range": [a, b], "vertices": V, "fps": f, "meshes": {frame: [[x, y, z], ...]},
+"heads": {frame: {bone: [x, y, z]}}} with the deformed (evaluated) mesh and the bones' heads in world
+space, in glTF's Y-up axes, frames counted from 0.
 """
 
 import json
@@ -27,7 +28,7 @@ def main() -> None:
     action = armature.animation_data.action
     start, end = action.frame_range
     fps = scene.render.fps / scene.render.fps_base
-    meshes = {}
+    meshes, heads = {}, {}
     for frame in frames:
         scene.frame_set(int(round(start)) + frame)
         depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -38,8 +39,13 @@ def main() -> None:
         points = [world @ v.co for v in data.vertices]
         meshes[frame] = [[p.x, p.z, -p.y] for p in points]
         evaluated.to_mesh_clear()
+        heads[frame] = {}
+        for bone in armature.pose.bones:
+            p = armature.matrix_world @ bone.head
+            heads[frame][bone.name] = [p.x, p.z, -p.y]
     print("JSON:" + json.dumps({"bones": len(armature.data.bones), "frame_range": [start, end],
-                                 "vertices": len(mesh.data.vertices), "fps": fps, "meshes": meshes}))
+                                 "vertices": len(mesh.data.vertices), "fps": fps, "meshes": meshes,
+                                 "heads": heads}))
 
 
 main()
