@@ -560,11 +560,23 @@ def resolve_weights(skeleton: Skeleton, weights: tuple[tuple[str, float], ...], 
     """Per-joint weights ``(J,)`` from ``(pattern, weight)`` pairs; later pairs win.
 
     A pattern is a limb name (its joints and everything below its end), an
-    exact joint name, or a shell pattern over joint names.
+    exact joint name, ``root`` or ``pelvis`` (the root, on any rig, unless a joint
+    has that name), or a shell pattern over joint names.
+
+    Joints welded together (a link shorter than `WELD` of the body's height:
+    Reallusion's CC_Base_Pelvis on CC_Base_Hip, CMU's LHipJoint on Hips) take
+    one weight: the last given to any of them. Two welded joints exaggerated
+    apart would open a link of no length into one of centimetres, a stretch
+    of thousands of times that no correction can undo. For the same reason the
+    joints riding rigidly on another (`rider_joints`: fingers on a hand, toes on
+    a foot) take the weight of the joint they ride on.
     """
     out = np.ones(skeleton.num_joints)
+    weld = welded(skeleton)
     for pattern, weight in weights:
-        if pattern in LIMB_NAMES or (limbs and pattern in limbs):
+        if pattern in ROOT_NAMES and pattern not in skeleton.names:
+            joints = np.array([0])
+        elif pattern in LIMB_NAMES or (limbs and pattern in limbs):
             limbs = find_limbs(skeleton) if limbs is None else limbs
             if pattern not in limbs:
                 raise ConfigError(f"weight {pattern}={weight:g}: no {pattern} found on this skeleton")
@@ -577,10 +589,28 @@ def resolve_weights(skeleton: Skeleton, weights: tuple[tuple[str, float], ...], 
                 sample = ", ".join(skeleton.names[:6])
                 raise ConfigError(
                     f"weight {pattern}={weight:g}: no joint or limb matches {pattern!r} "
-                    f"(joints: {sample}, ...; limbs: {', '.join(LIMB_NAMES)})"
+                    f"(joints: {sample}, ...; limbs: {', '.join(LIMB_NAMES)}; root)"
                 )
-        out[joints] = weight
+        out[np.isin(weld, weld[joints])] = weight
+    for anchor, below in rider_joints(skeleton).items():
+        out[below] = out[anchor]
     return out
+
+
+#: Names a weight can give the root by on every rig.
+ROOT_NAMES = ("root", "pelvis")
+#: Links shorter than this share of the body's height weld their joints together (`welded`).
+WELD = 0.01
+
+
+def welded(skeleton: Skeleton) -> np.ndarray:
+    """``(J,)`` for each joint, the highest joint it is welded to by links shorter than `WELD` x height."""
+    short = skeleton.link_lengths() < WELD * skeleton.height()
+    weld = np.arange(skeleton.num_joints)
+    for j in range(1, skeleton.num_joints):  # parents come first: one pass (joints, not frames)
+        if short[j]:
+            weld[j] = weld[skeleton.parents[j]]
+    return weld
 
 
 def exaggerate(motion: Motion, config: PipelineConfig | None = None, **preset: Any) -> Motion:

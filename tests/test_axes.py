@@ -17,7 +17,7 @@ from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.rotations import quat_mul, quat_rotate
 from mocap_exaggerate.skeleton import Skeleton
 
-from .helpers import SAMPLE_DIR, glb_joint_positions, shared
+from .helpers import SAMPLE_DIR, glb_joint_positions, shared, shared_clip_params
 
 RUN = SAMPLE_DIR / "cmu_09_01_run_daz.bvh"
 #: +90 degrees about X: Y up becomes Z up and the +Z front becomes -Y (Blender's and 3ds Max's way).
@@ -112,3 +112,34 @@ def test_root_offset_on_the_command_line(given, tmp_path):
     bad = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "exaggerate", str(path),
                           "-o", str(tmp_path / "x"), "--root-offset", "sideways"], capture_output=True, text=True)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and not (tmp_path / "x").exists()
+
+
+# ---------------------------------------------------------------------------- weights on any rig
+
+
+@pytest.mark.parametrize("path", shared_clip_params())
+def test_root_weight_zero_keeps_every_rig_within_the_presets_stretch(path):
+    """``--weight root=0`` means the root on every rig; no link explodes (the presets' worst link
+    stretch over the shared clips is 1.46x at cartoon: held to 1.5)."""
+    motion, _ = read_bvh(path, fps=120.0 if "amc2bvh" in path.name else None)  # its header says 30
+    result = run(motion, resolve_config("cartoon", None, {"extrapolate": {"weights": [["root", 0.0]]}}))
+    assert result.max_link_stretch < 1.5
+
+
+def test_a_weight_on_a_root_with_a_welded_pelvis_moves_both():
+    """iClone's CC_Base_Pelvis sits on CC_Base_Hip (a link of 0.07 mm). A weight given to the hip
+    alone once opened that link into 9 cm (138,445x); welded joints now share their weight."""
+    from mocap_exaggerate.pipeline import resolve_weights, welded
+
+    motion, _ = read_bvh(shared("cmu_06_15_basketball_dribble_shoot_iclone.bvh"))
+    skeleton = motion.skeleton
+    hip, pelvis = skeleton.index("CC_Base_Hip"), skeleton.index("CC_Base_Pelvis")
+    assert welded(skeleton)[pelvis] == hip
+    weights = resolve_weights(skeleton, (("CC_Base_Hip", 0.0),))
+    assert weights[hip] == weights[pelvis] == 0.0 and weights.sum() == skeleton.num_joints - 2
+    result = run(motion, resolve_config("cartoon", None, {"extrapolate": {"weights": [["CC_Base_Hip", 0.0]]}}))
+    assert result.max_link_stretch < 1.5
+    out = result.world_positions[:, result.original_index]
+    assert np.linalg.norm(out[:, pelvis] - out[:, hip], axis=1).max() < 0.001 * skeleton.height()
+    # `root` and `pelvis` name the root, unless a joint has that name (MakeHuman's root joint is `root`).
+    assert np.array_equal(resolve_weights(skeleton, (("pelvis", 0.0),)), weights)

@@ -158,7 +158,8 @@ def test_weights_by_joint_pattern_and_limb(sample_clip):
     index = skeleton.index
     assert weights[index("hip")] == 0.0
     assert weights[index("lHand")] == 5.0
-    assert weights[index("lIndex1")] == 3.0  # pattern after limb wins
+    assert weights[index("lForeArm")] == 3.0  # pattern after limb wins
+    assert weights[index("lIndex1")] == 5.0  # a finger rides on its hand: it takes the hand's weight
     assert weights[index("rShldr")] == 1.0
     only_limb = resolve_weights(skeleton, (("left_arm", 2.0),))
     arm = {index(n) for n in ("lShldr", "lForeArm", "lHand", "lIndex1", "lThumb2")}
