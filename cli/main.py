@@ -715,26 +715,38 @@ def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float
 @cli.command()
 @click.argument("input_path", metavar="IN.bvh", type=click.Path(path_type=Path, allow_dash=True))
 @click.option("-o", "--output", required=True, type=click.Path(path_type=Path),
-              help="PNG file to write.")
+              help="File to write: .png (still frames), .gif (looping animation) or .mp4 (needs ffmpeg).")
 @click.option("--frames", "count", type=click.IntRange(1, 12), default=5, show_default=True,
-              help="How many evenly spaced frames to show.")
-@click.option("--overwrite", is_flag=True, help="Replace the PNG if it exists.")
+              help="How many evenly spaced frames a .png shows.")
+@click.option("--trajectory", metavar="JOINT", default=None,
+              help="Draw this joint's captured, averaged and exaggerated paths instead (a .png).")
+@click.option("--start", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="SECONDS",
+              help="Show the motion from this many seconds in.")
+@click.option("--seconds", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="SECONDS",
+              help="Show this many seconds [default: all; an animation stops at 10].")
+@click.option("--overwrite", is_flag=True, help="Replace the file if it exists.")
 @pipeline_options
 @verbosity_options
 @_fail_cleanly
-def preview(input_path: Path, output: Path, count: int, overwrite: bool, **options) -> None:
-    """Render the skinned body, captured above and exaggerated below, to a PNG (no GPU, no display).
+def preview(input_path: Path, output: Path, count: int, trajectory: str | None, start: float, seconds: float | None,
+            overwrite: bool, **options) -> None:
+    """Render the skinned body captured and exaggerated (no GPU, no display).
+
+    A .png shows still frames, captured above and exaggerated below; a .gif or .mp4 plays
+    them side by side at the clip's speed, looping; --trajectory draws one joint's paths.
 
     \b
-    Example:
+    Examples:
       mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o run.png --preset looney
+      mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o run.gif
+      mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o foot.png --trajectory lFoot
     """
     from mocap_exaggerate.preview import write_preview
 
     _, config = _config_from_options(options)
     from_stdin = str(input_path) == "-"
     write_preview(sys.stdin.buffer if from_stdin else input_path, output, config, frames=count, overwrite=overwrite,
-                  label="<stdin>" if from_stdin else None)
+                  label="<stdin>" if from_stdin else None, trajectory=trajectory, start=start, seconds=seconds)
     if not _quiet():
         click.echo(f"wrote {output}", err=True)
 

@@ -46,7 +46,7 @@ DEFAULT_GLOB = "**/*.bvh"
 
 #: Modules a worker imports once, before its first clip.
 _PRELOAD = ["mocap_exaggerate.job", "mocap_exaggerate.pipeline", "mocap_exaggerate.outputs",
-            "mocap_exaggerate.io.gltf", "mocap_exaggerate.body", "mocap_exaggerate.skinning", "manifold3d"]
+            "mocap_exaggerate.io.gltf", "mocap_exaggerate.body", "mocap_exaggerate.skinning"]
 
 
 @dataclass(frozen=True)
