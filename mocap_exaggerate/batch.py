@@ -27,6 +27,7 @@ import os
 import re
 import signal
 import time
+import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
@@ -557,6 +558,15 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
                     collect(future)
                 hand_out()
 
+        # The forkserver and the workers start with Ctrl-C ignored (the disposition passes through
+        # exec and fork): one pressed while they are still importing would otherwise print their
+        # tracebacks. The batch itself hears it as soon as they are started.
+        before = signal.signal(signal.SIGINT, signal.SIG_IGN) if threading.current_thread() is threading.main_thread() else None
+        try:
+            hand_out()
+        finally:
+            if before is not None:
+                signal.signal(signal.SIGINT, before)
         try:
             drain()
         except KeyboardInterrupt:
