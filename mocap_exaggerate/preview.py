@@ -293,17 +293,15 @@ def _camera(root_across: np.ndarray, points: np.ndarray, tall: float, sigma: flo
 
     Standing still over everything drawn unless the root travels more than half the body's
     height ``tall``; then following it, smoothed over ``sigma`` frames so that the body's own
-    surges show. The ends are padded by point reflection, which keeps a steady run steady there.
+    surges show: the extrapolation's own Gaussian average, whose point-reflected ends keep a
+    steady run steady there.
     """
-    from scipy.ndimage import gaussian_filter1d
+    from .stages.extrapolate import gaussian_average
 
     if np.ptp(root_across) <= 0.5 * tall:
         across = points[..., 0]
         return np.full(len(root_across), 0.5 * (across.min() + across.max()))
-    x = root_across
-    pad = min(len(x) - 1, int(4 * sigma) + 1)
-    padded = np.concatenate([2 * x[0] - x[pad:0:-1], x, 2 * x[-1] - x[-2:-pad - 2:-1]])
-    return gaussian_filter1d(padded, sigma, mode="nearest")[pad:pad + len(x)]
+    return gaussian_average(root_across, sigma)
 
 
 def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,

@@ -28,7 +28,7 @@ from mocap_exaggerate.stages.contacts import (
 from mocap_exaggerate.stages.stretch import StretchSpec
 from mocap_exaggerate.tpose import detect_rest_frames
 
-from .helpers import SHARED_BVH, shared
+from .helpers import shared
 
 # A hand-made leg: hips, thigh, knee, ankle; the foot stands still on the floor for the first
 # 40 frames while the hips bob, then lifts.

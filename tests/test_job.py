@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from mocap_exaggerate import convert
-from mocap_exaggerate.config import load_preset, resolve_config
+from mocap_exaggerate.config import resolve_config
 from mocap_exaggerate.errors import ConfigError, InputError
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.files import OutputExistsError, OutputSet, write_files
