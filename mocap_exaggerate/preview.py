@@ -259,14 +259,16 @@ def preview_window(motion: Motion, result: PipelineResult, *, start: float = 0.0
     check_number("start", start, 0.0, math.inf)
     first = result.rest_frames if not result.rest_frames_dropped else 0
     total = result.world_positions.shape[0]
-    begin = first + int(round(start / motion.frame_time))
-    if begin >= total:
+    begin = first + start / motion.frame_time  # a float until it is known to be a frame: start may be inf
+    if begin >= total - 0.5:
         length = max(total - 1 - first, 0) * motion.frame_time
         raise ConfigError(f"start {start:g} s is past the end of the motion ({length:.3f} s long)")
+    begin = int(round(begin))
     if seconds is None:
         return begin, total
     check_number("seconds", seconds, 0.0, math.inf, low_open=True)
-    return begin, min(total, begin + max(int(round(seconds / motion.frame_time)), 1))
+    count = seconds / motion.frame_time  # inf shows the rest
+    return begin, total if count >= total - begin else min(total, begin + max(int(round(count)), 1))
 
 
 def animation_frames(motion: Motion, result: PipelineResult, *, start: float = 0.0, seconds: float | None = None,

@@ -203,3 +203,18 @@ def test_an_mp4_holds_the_frames_of_the_animation(tmp_path):
                              stderr=subprocess.PIPE, text=True, timeout=60)
     counted = [line for line in decoded.stderr.replace("\r", "\n").splitlines() if line.startswith("frame=")]
     assert decoded.returncode == 0 and int(counted[-1].split("=")[1].split()[0]) == len(range(4, 64, 6))
+
+
+@pytest.mark.parametrize("window, said", [(("--start", "inf"), "past the end"), (("--start", "1.3"), "past the end"),
+                                          (("--seconds", "nan"), "seconds must be")])
+def test_a_window_outside_the_motion_is_one_line_and_nothing_written(window, said, tmp_path):
+    """As users run it: an infinite start once overflowed into a traceback."""
+    target = tmp_path / "run.gif"
+    done = command("preview", RUN, "-o", target, *window)
+    assert done.returncode == 2 and said in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    assert "Traceback" not in done.stderr and not target.exists()
+
+
+def test_an_infinite_length_shows_the_rest_of_the_motion():
+    motion, result = exaggerate(RUN)
+    assert preview_window(motion, result, start=0.5, seconds=float("inf")) == preview_window(motion, result, start=0.5)
