@@ -234,11 +234,19 @@ def test_resume_redoes_a_clip_whose_input_or_options_changed(tmp_path):
     assert statuses("--omega", "3") == {"clip00": "converted", "clip01": "skipped"}
 
 
+def _hears_ctrl_c() -> None:
+    """In the child before it starts: Ctrl-C at its default, as in a terminal. A test run started
+    in the background by a non-interactive shell (``.ci/run &``) has SIGINT ignored, and a
+    Python started with it ignored never hears it."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_lets_running_clips_finish_and_says_what_did_not_start(tmp_path):
     folder = copies(tmp_path, 12)
     out = tmp_path / "out"
     process = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", folder, out, "-j", "2"],
-                               stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, start_new_session=True)
+                               stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, start_new_session=True,
+                               preexec_fn=_hears_ctrl_c)
     deadline = time.monotonic() + 120
     while not list(out.glob("*.json")) and time.monotonic() < deadline and process.poll() is None:
         time.sleep(0.02)
