@@ -37,6 +37,9 @@ class Skin:
     weights : (V, K) float64, each row sums to 1
     bind : joint name -> (3,) bind-pose position, where the mesh's bind pose
         is not the skeleton's rest pose (MakeHuman's A-pose); empty otherwise
+    parents : joint name -> its parent's name, the skin's own hierarchy where the
+        file gives one (a glTF node tree, a MakeHuman .mhskel); roots are absent.
+        `mocap_exaggerate.binding` uses it to fit a character to another rig.
     """
 
     vertices: np.ndarray
@@ -45,6 +48,7 @@ class Skin:
     joints: np.ndarray
     weights: np.ndarray
     bind: dict = field(default_factory=dict)
+    parents: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         v = np.asarray(self.vertices, dtype=np.float64)

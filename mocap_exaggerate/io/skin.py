@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..rotations import quat_to_matrix
 from ..skinning import Skin, top_influences
 
 __all__ = ["load_skin", "check_skin", "load_npz_skin", "load_gltf_skin", "load_makehuman_skin", "npz_bytes"]
@@ -75,7 +76,7 @@ def load_makehuman_skin(obj_path: str | os.PathLike, weights_path: str | os.Path
         cols.append(np.full(int(keep.sum()), column))
         values.append(pairs[keep, 1])
     joints, weights = top_influences(np.concatenate(rows), np.concatenate(cols), np.concatenate(values), len(used), 8)
-    bind = {}
+    bind, parents = {}, {}
     skeleton_files = sorted(obj_path.parent.glob("*.mhskel"))
     if skeleton_files:
         # Bone heads in the mesh's own (A-)pose: each joint is the mean of its vertex group.
@@ -84,7 +85,9 @@ def load_makehuman_skin(obj_path: str | os.PathLike, weights_path: str | os.Path
             group = rig.get("joints", {}).get(bone.get("head"), [])
             if group:
                 bind[name] = vertices[np.asarray(group, dtype=np.int64)].mean(axis=0)
-    return Skin(vertices[used], remap[faces], names, joints, weights, bind)
+            if bone.get("parent"):
+                parents[name] = str(bone["parent"])
+    return Skin(vertices[used], remap[faces], names, joints, weights, bind, parents)
 
 
 def _read_obj_group(path: Path, group: str) -> tuple[np.ndarray, np.ndarray]:
@@ -109,10 +112,17 @@ def _read_obj_group(path: Path, group: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def load_gltf_skin(path: str | os.PathLike) -> Skin:
-    """The first skinned mesh of a glTF/GLB file, its joints named by their nodes.
+    """The first skinned mesh of a glTF/GLB file as it stands in the file's scene, in world space.
 
-    The bind pose is the mesh as stored; ``bind`` holds each joint's bind
-    position from its inverse bind matrix.
+    Node transforms count (an armature turned Z-up to Y-up, scaled by 0.01, a
+    mesh node moved): a viewer draws the bind pose at ``world(joint) @ IBM @ v``,
+    so when every joint gives the same ``world(joint) @ IBM`` (the nodes stand at
+    bind) that one matrix places the mesh and ``bind`` holds the joint nodes'
+    world positions. Otherwise the nodes are posed away from bind, and the
+    mesh node's world matrix carries both the mesh and the inverse bind
+    matrices' bind positions. Joints are named by their nodes (``joint{node}``
+    unnamed, ``_2``, ``_3``... after a repeated name); ``parents`` is each joint's
+    nearest ancestor node that is a joint too.
     """
     import pygltflib as gl
 
@@ -148,11 +158,15 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
             values = values / np.iinfo(dtype).max
         return values
 
-    owner = next((n for n in gltf.nodes if n.mesh is not None and n.skin is not None), None)
-    if owner is None:
+    owner_index = next((i for i, n in enumerate(gltf.nodes) if n.mesh is not None and n.skin is not None), None)
+    if owner_index is None:
         raise InputError("no skinned mesh in the file", source=label)
+    owner = gltf.nodes[owner_index]
     skin_def = gltf.skins[owner.skin]
-    names = tuple(gltf.nodes[j].name or f"joint{j}" for j in skin_def.joints)
+    joint_nodes = list(skin_def.joints or [])
+    if not joint_nodes or not all(type(j) is int and 0 <= j < len(gltf.nodes) for j in joint_nodes):
+        raise InputError("the skin's joints must be node numbers", source=label)
+    names = _unique_names([gltf.nodes[j].name or f"joint{j}" for j in joint_nodes])
     primitive = gltf.meshes[owner.mesh].primitives[0]
     attributes = primitive.attributes
     if attributes.JOINTS_0 is None or attributes.WEIGHTS_0 is None:
@@ -166,14 +180,133 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
     joints = np.concatenate(joints, axis=1).astype(np.int64)
     weights = np.concatenate(weights, axis=1).astype(np.float64)
     faces = read(primitive.indices).reshape(-1, 3) if primitive.indices is not None else np.arange(len(vertices)).reshape(-1, 3)
-    bind = {}
+    faces = faces.astype(np.int64)
+
+    world, parent = _world_matrices(gltf.nodes, label)
+    inverse = np.tile(np.eye(4), (len(joint_nodes), 1, 1))
     if skin_def.inverseBindMatrices is not None:
-        inverse = read(skin_def.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
-        for name, matrix in zip(names, inverse):
-            bind[name] = np.linalg.inv(matrix)[:3, 3]
+        stored = read(skin_def.inverseBindMatrices)
+        if stored.shape[1] != 16 or len(stored) < len(joint_nodes):
+            raise InputError(f"the skin has {len(joint_nodes)} joints but {len(stored)} inverse bind matrices",
+                             source=label)
+        # glTF matrices are column-major: each row read is the transpose.
+        inverse = stored[: len(joint_nodes)].reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
+        if not np.all(np.isfinite(inverse)):
+            raise InputError("inverse bind matrices must be finite numbers", source=label)
+    placed = world[joint_nodes] @ inverse  # (J, 4, 4): where each joint draws the mesh at bind
+    corners = np.ones((8, 4))
+    corners[:, :3] = np.where((np.arange(8)[:, None] >> np.arange(3)) & 1, vertices.max(axis=0), vertices.min(axis=0))
+    # The bounding box's corners bound how far apart any two matrices take any vertex.
+    reached = np.einsum("jab,cb->jca", placed[:, :3], corners)  # (J, 8, 3)
+    middle = reached.mean(axis=0)
+    size = float(np.linalg.norm(middle.max(axis=0) - middle.min(axis=0)))
+    if np.max(np.linalg.norm(reached - middle, axis=-1)) <= 1e-4 * max(size, 1e-12):
+        transform = placed.mean(axis=0)
+        bind_world = world[joint_nodes]
+    else:
+        transform = world[owner_index]
+        try:
+            bind_world = transform @ np.linalg.inv(inverse)
+        except np.linalg.LinAlgError:
+            raise InputError("an inverse bind matrix cannot be inverted", source=label) from None
+    vertices = vertices @ transform[:3, :3].T + transform[:3, 3]
+    if np.linalg.det(transform[:3, :3]) < 0:
+        faces = faces[:, ::-1]  # a mirror turns the winding inside out: turn it back
+    bind = {name: matrix[:3, 3].copy() for name, matrix in zip(names, bind_world)}
+
+    joint_name = {}
+    for node, name in zip(joint_nodes, names):
+        joint_name.setdefault(node, name)
+    parents = {}
+    for node, name in zip(joint_nodes, names):
+        above = parent[node]
+        while above >= 0 and above not in joint_name:
+            above = parent[above]
+        if above >= 0:
+            parents[name] = joint_name[above]
+
     rows = np.repeat(np.arange(len(vertices)), joints.shape[1])
     top_j, top_w = top_influences(rows, joints.ravel(), weights.ravel(), len(vertices), 8)
-    return Skin(vertices, faces.astype(np.int64), names, top_j, top_w, bind)
+    return Skin(vertices, np.ascontiguousarray(faces), names, top_j, top_w, bind, parents)
+
+
+def _unique_names(names: list[str]) -> tuple[str, ...]:
+    """``names`` with each repeat suffixed ``_2``, ``_3``... (skipping names already present), first one kept."""
+    taken = set(names)
+    seen: set[str] = set()
+    unique = []
+    for name in names:
+        if name in seen:
+            number = 2
+            while f"{name}_{number}" in taken:
+                number += 1
+            name = f"{name}_{number}"
+            taken.add(name)
+        seen.add(name)
+        unique.append(name)
+    return tuple(unique)
+
+
+def _node_local(node, number: int, label: str) -> np.ndarray:
+    """A glTF node's local 4x4 matrix: its ``matrix`` (column-major), else translation @ rotation @ scale."""
+
+    def numbers(value, size: int, what: str) -> np.ndarray:
+        try:
+            array = np.array(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            array = np.zeros(0)
+        if array.shape != (size,) or not np.all(np.isfinite(array)):
+            raise InputError(f"node {number}'s {what} must be {size} finite numbers", source=label)
+        return array
+
+    if node.matrix is not None:
+        return numbers(node.matrix, 16, "matrix").reshape(4, 4).T
+    local = np.eye(4)
+    if node.rotation is not None:
+        quaternion = numbers(node.rotation, 4, "rotation")
+        length = np.linalg.norm(quaternion)
+        if length < 1e-12:
+            raise InputError(f"node {number}'s rotation is not a quaternion (all zeros)", source=label)
+        local[:3, :3] = quat_to_matrix(quaternion / length)  # x, y, z, w as glTF stores it
+    if node.scale is not None:
+        local[:3, :3] = local[:3, :3] * numbers(node.scale, 3, "scale")
+    if node.translation is not None:
+        local[:3, 3] = numbers(node.translation, 3, "translation")
+    return local
+
+
+def _world_matrices(nodes: list, label: str) -> tuple[np.ndarray, np.ndarray]:
+    """Every node's world matrix ``(N, 4, 4)`` and its parent (``-1`` at a root), from ``children``.
+
+    Each node is placed through its own ancestors, so one outside every scene
+    still gets one; a node listed twice as a child keeps its first parent; a
+    loop in the tree is an InputError.
+    """
+    count = len(nodes)
+    parent = np.full(count, -1, dtype=np.int64)
+    for number, node in enumerate(nodes):
+        for child in node.children or []:
+            if not (type(child) is int and 0 <= child < count):
+                raise InputError(f"node {number} has a child {str(child)[:20]!r} that is not a node", source=label)
+            if child == number:
+                raise InputError(f"node {number} is its own child", source=label)
+            if parent[child] < 0:
+                parent[child] = number
+    local = [_node_local(node, number, label) for number, node in enumerate(nodes)]
+    world = np.zeros((count, 4, 4))
+    done = np.zeros(count, dtype=bool)
+    for start in range(count):
+        chain, node = [], start
+        while node >= 0 and not done[node]:
+            chain.append(node)
+            if len(chain) > count:
+                raise InputError(f"the node tree loops (through node {start})", source=label)
+            node = parent[node]
+        above = world[node] if node >= 0 else np.eye(4)
+        for number in reversed(chain):
+            above = world[number] = above @ local[number]
+            done[number] = True
+    return world, parent
 
 
 def _buffer_data(uri: str | None, folder: Path, label: str) -> bytes:
