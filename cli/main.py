@@ -177,8 +177,12 @@ def output_options(func: Callable) -> Callable:
     options = [
         click.option("--overwrite", is_flag=True, help="Replace outputs that exist already."),
         click.option("--skin", "skin_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-                     help="Skin for the GLB: .npz (vertices, faces, joint_names, weights) bound to the clip's "
-                          "joints in its rest pose. Default: a capsule body grown from the skeleton."),
+                     help="Your character for the GLB: a skinned .glb/.gltf, a MakeHuman .obj (+ .mhw, .mhskel "
+                          "beside it) or an .npz bound to the clip's joints. Made for another rig, it is fitted to "
+                          "the clip (joints paired by role and name). Default: a capsule body grown from the skeleton."),
+        click.option("--joint-map", "joint_map_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                     help="With --skin: a text file of 'clip joint = skin joint' lines, for joints the automatic "
+                          "pairing misses or gets wrong."),
         click.option("--units", default="auto", show_default=True,
                      help="BVH units for the GLB (metres): auto, m, dm, cm, mm, in, ft, cmu."),
         click.option("--influences", type=click.Choice(["4", "8"]), default="4", show_default=True,
@@ -344,9 +348,10 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
       mocap-exaggerate exaggerate walk.bvh run.bvh jump.bvh -o out/
       cat walk.bvh | mocap-exaggerate exaggerate - -o - > walk_cartoon.bvh
     """
+    joint_map_path = options.pop("joint_map_path")
     if len(input_paths) > 1:
         return _exaggerate_several(input_paths, output, name, overwrite, skin_path, units, influences, write_glb,
-                                   trails_path, path_file, options)
+                                   trails_path, path_file, options, joint_map_path)
     input_path = input_paths[0]
     from mocap_exaggerate.job import convert
 
@@ -362,6 +367,7 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
         overwrite=overwrite,
         glb=write_glb,
         skin=skin_path,
+        joint_map=_joint_map(skin_path, joint_map_path) if write_glb else None,
         units=units,
         influences=int(influences),
         trails=trails_path,
@@ -384,26 +390,40 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
         )
 
 
-def _check_output_settings(units: str, influences: str, skin_path: Path | None) -> None:
-    """Refuse a bad unit or skin once, before any file of a batch runs (each would fail alike)."""
+def _check_output_settings(units: str, influences: str, skin_path: Path | None,
+                           joint_map_path: Path | None = None) -> dict | None:
+    """Refuse a bad unit, skin or joint map once, before any file of a batch runs (each would fail
+    alike); the joint map read."""
     from mocap_exaggerate.io.gltf import unit_scale
     from mocap_exaggerate.io.skin import load_skin
 
     unit_scale(units, 1.0)
+    joint_map = _joint_map(skin_path, joint_map_path)
     if skin_path is not None:
         load_skin(skin_path)
+    return joint_map
+
+
+def _joint_map(skin_path: Path | None, joint_map_path: Path | None) -> dict | None:
+    """The --joint-map file read (None without one); refused without a --skin to pair with."""
+    from mocap_exaggerate.binding import read_joint_map
+
+    if joint_map_path is None:
+        return None
+    if skin_path is None:
+        raise UserError("--joint-map pairs the clip's joints with a --skin's: give the skin too")
+    return read_joint_map(joint_map_path)
 
 
 def _batch_options(options: dict[str, Any], *, overwrite: bool, resume: bool, write_glb: bool,
-                   skin_path: Path | None, units: str, influences: str):
+                   skin_path: Path | None, units: str, influences: str, joint_map_path: Path | None = None):
     from mocap_exaggerate.batch import BatchOptions
 
     preset, config = _config_from_options(options)
-    if write_glb:
-        _check_output_settings(units, influences, skin_path)
+    joint_map = _check_output_settings(units, influences, skin_path, joint_map_path) if write_glb else None
     return BatchOptions(config, preset=preset, overwrite=overwrite, resume=resume, glb=write_glb,
-                        skin=str(skin_path.resolve()) if skin_path is not None else None, units=units,
-                        influences=int(influences))
+                        skin=str(skin_path.resolve()) if skin_path is not None else None, joint_map=joint_map,
+                        units=units, influences=int(influences))
 
 
 def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bool, problems=(),
@@ -452,7 +472,7 @@ def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bo
 
 
 def _exaggerate_several(input_paths, output: Path, name, overwrite, skin_path, units, influences, write_glb,
-                        trails_path, path_file, options) -> None:
+                        trails_path, path_file, options, joint_map_path=None) -> None:
     from mocap_exaggerate.batch import Clip, same_outputs
 
     if any(str(p) == "-" for p in input_paths):
@@ -471,7 +491,8 @@ def _exaggerate_several(input_paths, output: Path, name, overwrite, skin_path, u
         raise UserError(f"{other.source} and {clip.source} would write the same outputs in {output}; convert them "
                         f"apart (or use 'batch', which mirrors folders)")
     batch_options = _batch_options(options, overwrite=overwrite, resume=False, write_glb=write_glb,
-                                   skin_path=skin_path, units=units, influences=influences)
+                                   skin_path=skin_path, units=units, influences=influences,
+                                   joint_map_path=joint_map_path)
     code = _run_reported(clips, output, batch_options, jobs=1, as_json=False)
     if code:
         click.get_current_context().exit(code)
@@ -541,7 +562,8 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
     from mocap_exaggerate.batch import check_scheduler, default_jobs
 
     batch_options = _batch_options(options, overwrite=overwrite, resume=resume, write_glb=write_glb,
-                                   skin_path=skin_path, units=units, influences=influences)
+                                   skin_path=skin_path, units=units, influences=influences,
+                                   joint_map_path=options.pop("joint_map_path"))
     batch_options = dataclasses.replace(batch_options, report=write_report)
     if scheduler is not None:
         if scheduler != "local" and jobs is not None:
@@ -611,7 +633,8 @@ def plan(in_dir: Path, out_dir: Path, pattern: str, overwrite: bool, skin_path: 
     import shlex
 
     _batch_options(options, overwrite=overwrite, resume=False, write_glb=write_glb, skin_path=skin_path,
-                   units=units, influences=influences)  # a bad setting is refused here, not on the farm
+                   units=units, influences=influences,
+                   joint_map_path=options.pop("joint_map_path"))  # a bad setting is refused here, not on the farm
     clips, problems = _find_batch_clips(in_dir, out_dir, pattern)
     for problem in problems:
         log.warning("%s: %s", problem.input, problem.error)
@@ -725,11 +748,15 @@ def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float
 @click.option("--seconds", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="SECONDS",
               help="Show this many seconds [default: all; an animation stops at 10].")
 @click.option("--overwrite", is_flag=True, help="Replace the file if it exists.")
+@click.option("--skin", "skin_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Draw your character (as 'exaggerate --skin' takes it) instead of the capsule body.")
+@click.option("--joint-map", "joint_map_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="With --skin: 'clip joint = skin joint' lines for joints the pairing misses.")
 @pipeline_options
 @verbosity_options
 @_fail_cleanly
 def preview(input_path: Path, output: Path, count: int, trajectory: str | None, start: float, seconds: float | None,
-            overwrite: bool, **options) -> None:
+            overwrite: bool, skin_path: Path | None, joint_map_path: Path | None, **options) -> None:
     """Render the skinned body captured and exaggerated (no GPU, no display).
 
     A .png shows still frames, captured above and exaggerated below; a .gif or .mp4 plays
@@ -746,7 +773,8 @@ def preview(input_path: Path, output: Path, count: int, trajectory: str | None, 
     _, config = _config_from_options(options)
     from_stdin = str(input_path) == "-"
     write_preview(sys.stdin.buffer if from_stdin else input_path, output, config, frames=count, overwrite=overwrite,
-                  label="<stdin>" if from_stdin else None, trajectory=trajectory, start=start, seconds=seconds)
+                  label="<stdin>" if from_stdin else None, trajectory=trajectory, start=start, seconds=seconds,
+                  skin=skin_path, joint_map=_joint_map(skin_path, joint_map_path))
     if not _quiet():
         click.echo(f"wrote {output}", err=True)
 

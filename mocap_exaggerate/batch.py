@@ -84,6 +84,7 @@ class BatchOptions:
     resume: bool = False
     glb: bool = True
     skin: str | None = None
+    joint_map: dict | None = None
     units: str = "auto"
     influences: int = 4
     report: bool = False
@@ -329,7 +330,7 @@ def _not_complete(clip: Clip, out_dir, options: BatchOptions, parameters: str | 
         return "no outputs yet" if not manifest.exists() else "outputs incomplete (the manifest does not read)"
     if parameters is None:
         parameters = parameters_digest(options.config, preset=options.preset, glb=options.glb, units=options.units,
-                                       influences=options.influences, skin=options.skin)
+                                       influences=options.influences, skin=options.skin, joint_map=options.joint_map)
     if info.get("parameters") != parameters:
         return "made with other options"
     try:
@@ -387,7 +388,8 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
                 return _kept(label, clip, out_dir, started)
         record = convert(clip.source, Path(out_dir) / clip.relative.parent, options.config, preset=options.preset,
                          name=clip.name, label=label, overwrite=options.overwrite or options.resume, glb=options.glb,
-                         skin=options.skin, units=options.units, influences=options.influences,
+                         skin=options.skin, joint_map=options.joint_map, units=options.units,
+                         influences=options.influences,
                          parameters=parameters)
     except OutputExistsError as error:
         return failed(f"{error}; --overwrite replaces it (batch --resume keeps finished clips, redoes the rest)")
@@ -485,7 +487,7 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
     from .job import parameters_digest
 
     parameters = parameters_digest(options.config, preset=options.preset, glb=options.glb, units=options.units,
-                                   influences=options.influences, skin=options.skin)
+                                   influences=options.influences, skin=options.skin, joint_map=options.joint_map)
     order = {clip: index for index, clip in enumerate(clips)}
     done: dict[Clip, FileResult] = {}
 

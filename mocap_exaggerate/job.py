@@ -120,11 +120,11 @@ def _default_name(source: Source) -> str:
 
 def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb: bool = True, units: str = "auto",
                       influences: int = 4, skin: Skin | str | os.PathLike | None = None,
-                      path_file: str | os.PathLike | None = None) -> str:
+                      path_file: str | os.PathLike | None = None, joint_map: dict | str | os.PathLike | None = None) -> str:
     """``sha256:<hex>`` of everything besides the input that decides a job's output files.
 
     The resolved pipeline (whatever preset, file or flags it came from), the
-    output options, the skin's and edited paths' bytes, and the tool's version.
+    output options, the skin's and edited paths' bytes, the joint map, and the tool's version.
     The manifest records it as ``parameters``; ``batch --resume`` redoes a clip
     whose manifest names other parameters.
     """
@@ -144,6 +144,10 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
     fields = {"version": __version__, "preset": preset, "config": config.to_dict(), "glb": bool(glb),
               "units": units, "influences": int(influences), "skin": skin_content(skin),
               "path_file": file_digest(Path(path_file).read_bytes()) if path_file is not None else None}
+    if joint_map is not None:  # only when given: digests of runs without one stay what they were
+        from .binding import read_joint_map
+
+        fields["joint_map"] = joint_map if isinstance(joint_map, dict) else read_joint_map(joint_map)
     return file_digest(json.dumps(fields, sort_keys=True, default=str).encode("utf-8"))
 
 
@@ -173,6 +177,7 @@ def convert(
     overwrite: bool = False,
     glb: bool = True,
     skin: Skin | str | os.PathLike | None = None,
+    joint_map: dict[str, str] | str | os.PathLike | None = None,
     units: str = "auto",
     influences: int = 4,
     trails: str | os.PathLike | None = None,
@@ -192,7 +197,10 @@ def convert(
     label : how to call the input in messages (default: its path)
     overwrite : replace outputs that exist (an input is never replaced)
     glb : also write the skinned GLB and the re-weighted skin
-    skin : a `Skin` or a skin file for the GLB (default: a body grown from the skeleton)
+    skin : a `Skin` or a skin file for the GLB (default: a body grown from the skeleton); one made
+        for another rig is bound to the clip (`mocap_exaggerate.binding`)
+    joint_map : clip joint -> skin joint pairs for that binding (or a joint map file), for joints
+        the automatic pairing misses
     units, influences : the GLB's units (``auto``, ``cm``, ...) and joints per vertex (4 or 8)
     trails : also write every stretch's end-effector paths to this JSON file
     path_file : a trails file with edited paths for the limbs to follow
@@ -216,7 +224,7 @@ def convert(
     if config is None:
         config = load_preset(preset or DEFAULT_PRESET)
     to_stream = hasattr(output, "write")
-    inputs = [Path(p) for p in (source, path_file, skin, *protect) if isinstance(p, (str, os.PathLike))
+    inputs = [Path(p) for p in (source, path_file, skin, joint_map, *protect) if isinstance(p, (str, os.PathLike))
               and str(p) != "-"]
     data, label = read_source(source, label)
     stem = check_name(name if name is not None else _default_name(source))
@@ -243,16 +251,31 @@ def convert(
     from .io.trails import read_trails
 
     paths = read_trails(path_file) if path_file is not None else None
+    if joint_map is not None and not isinstance(joint_map, dict):
+        from .binding import read_joint_map
+
+        joint_map = read_joint_map(joint_map)
+    skin_label = "skin" if skin is None or isinstance(skin, Skin) else str(skin)
     if skin is not None:
         skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
+    elif joint_map:
+        raise ConfigError("a joint map pairs the clip's joints with a skin's: give the skin too (--skin)")
     if parameters is None and not to_stream:
         parameters = parameters_digest(config, preset=preset, glb=glb, units=units, influences=influences, skin=skin,
-                                       path_file=path_file)
+                                       path_file=path_file, joint_map=joint_map)
 
     timings: dict[str, float] = {}
     motion, report = read_bvh(data, name=label, fps=config.input.fps, root_offset=config.input.root_offset,
                               up=config.input.up)
     timings["read"] = time.perf_counter() - started
+    binding = None
+    if skin is not None and glb and not to_stream:  # bound before the run: a skin that will not bind costs nothing
+        from .binding import bind_skin
+
+        try:
+            skin, binding = bind_skin(skin, motion.skeleton, joint_map)
+        except ConfigError as error:
+            raise ConfigError(f"{skin_label}: {error} (clip {label})") from None
     result = run(motion, config, paths=paths)
     timings.update(result.timings)
     for target in targets.values():
@@ -305,6 +328,8 @@ def convert(
                             outputs=listed, reader_warnings=report.warnings, frames_in=motion.num_frames,
                             fps=motion.fps, timings=timings)
             info["parameters"] = parameters
+            if binding is not None:
+                info["skin_binding"] = binding.summary()
             written.add(targets["manifest"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))
         written.commit(retire_first=[targets["manifest"], *retired] if "manifest" in targets else [])
     return JobRecord(

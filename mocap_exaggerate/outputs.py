@@ -116,24 +116,17 @@ def _original_parents(result: PipelineResult) -> np.ndarray:
 
 
 def base_skin(motion: Motion, result: PipelineResult, skin: Skin | None = None) -> Skin:
-    """The skin on the clip's own joints: ``skin`` (checked against the rest pose) or the default body."""
+    """The skin on the clip's own joints in its rest pose: ``skin`` bound to the clip
+    (`mocap_exaggerate.binding.bind_skin`: as it is when it already is), or the default body."""
     skeleton = motion.skeleton
     hierarchy = result.hierarchy
     if skin is None:
         from .body import default_skin
 
         return default_skin(skeleton, hierarchy.rigid if hierarchy is not None else None)
-    if skin.bind:
-        # A skin with its own bind pose must have been bound in the clip's rest pose.
-        rest = skeleton.rest_positions()
-        off = [np.linalg.norm(np.asarray(p) - rest[skeleton.index(n)]) for n, p in skin.bind.items()
-               if n in skeleton.names]
-        if not off:
-            raise ConfigError("none of the skin's joints is named like a joint of the clip")
-        if max(off) > 1e-3 * skeleton.height():
-            raise ConfigError(f"the skin's bind pose is not the clip's rest pose (joints up to {max(off):.3g} "
-                              "units away); bind it in the BVH's rest pose")
-    return skin
+    from .binding import bind_skin
+
+    return bind_skin(skin, skeleton)[0]
 
 
 def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: int = 4) -> Skin:

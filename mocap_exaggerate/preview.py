@@ -108,14 +108,15 @@ def _view_axes(skeleton: Skeleton, root_path: np.ndarray) -> tuple[int, int, int
     return right, up, depth
 
 
-def pose_bodies(motion: Motion, result: PipelineResult, frames: np.ndarray) -> PosedBodies:
+def pose_bodies(motion: Motion, result: PipelineResult, frames: np.ndarray, skin: Skin | None = None) -> PosedBodies:
     """Pose both bodies at the output ``frames`` (ints into ``result``), all frames at once.
 
     The captured body stands on the clip's skeleton lined up frame for frame with the output
-    (`lined_up`); the exaggerated one is the default body re-weighted onto the output skeleton.
+    (`lined_up`); the exaggerated one is the same body (``skin`` bound to the clip, else the
+    default body) re-weighted onto the output skeleton.
     """
     skeleton = motion.skeleton
-    body = base_skin(motion, result)
+    body = base_skin(motion, result, skin)
     rubber = output_skin(motion, result, body)
     out_skeleton = result.motion.skeleton
     captured_rot, captured_pos = motion.forward_kinematics()
@@ -214,7 +215,7 @@ def telling_frames(motion: Motion, result: PipelineResult, count: int = 4, *,
 
 
 def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, width: float = 2.4,
-                   at: list[int] | None = None, dpi: int = 80) -> bytes:
+                   at: list[int] | None = None, dpi: int = 80, skin: Skin | None = None) -> bytes:
     """A PNG: the captured (top, grey) and exaggerated (bottom, orange) body at a few frames.
 
     ``at``: the output frames to draw (e.g. `telling_frames`); default ``frames`` evenly spaced.
@@ -230,7 +231,7 @@ def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, w
     first = result.rest_frames if not result.rest_frames_dropped else 0
     last = result.world_positions.shape[0] - 1
     picks = np.unique(np.linspace(first, last, frames).astype(int) if at is None else np.clip(at, 0, last))
-    bodies = pose_bodies(motion, result, picks)
+    bodies = pose_bodies(motion, result, picks, skin)
     right = bodies.axes[0]
     half, low, high = view_limits(bodies.screen_points(), bodies.root[:, right])
     row_height = width * (high - low) / (2.0 * half)
@@ -307,7 +308,7 @@ def _camera(root_across: np.ndarray, points: np.ndarray, tall: float, sigma: flo
 
 
 def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
-                  height: int = 320) -> Iterator[np.ndarray]:
+                  height: int = 320, skin: Skin | None = None) -> Iterator[np.ndarray]:
     """RGB pictures ``(H, W, 3) uint8``, one per output frame of ``frames``: the captured body
     (left, grey) and the exaggerated one (right, orange) side by side, one camera, one scale.
 
@@ -324,7 +325,7 @@ def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
     from matplotlib.path import Path as Path2D
 
     frames = np.asarray(frames, dtype=np.int64)
-    bodies = pose_bodies(motion, result, frames)
+    bodies = pose_bodies(motion, result, frames, skin)
     right, up, _ = bodies.axes
     points = bodies.screen_points()
     tall = motion.skeleton.height()
@@ -427,7 +428,7 @@ def gif_durations(count: int, frame_seconds: float) -> list[int]:
 
 
 def render_gif(motion: Motion, result: PipelineResult, *, start: float = 0.0, seconds: float | None = None,
-               max_fps: float = MAX_FPS, height: int = 320) -> bytes:
+               max_fps: float = MAX_FPS, height: int = 320, skin: Skin | None = None) -> bytes:
     """A looping animated GIF: captured (left) and exaggerated (right) side by side at the clip's
     speed, at most ``max_fps`` (up to 50: GIF viewers slow faster frames down); frames from
     `animation_frames`, pictures from `render_frames`. The same bytes every time."""
@@ -435,7 +436,7 @@ def render_gif(motion: Motion, result: PipelineResult, *, start: float = 0.0, se
     frames, frame_seconds = animation_frames(motion, result, start=start, seconds=seconds, max_fps=max_fps)
     palette = _gif_palette()
     lookup = np.full(1 << 24, -1, dtype=np.int16)
-    pictures = [_indexed(rgb, palette, lookup) for rgb in render_frames(motion, result, frames, height=height)]
+    pictures = [_indexed(rgb, palette, lookup) for rgb in render_frames(motion, result, frames, height=height, skin=skin)]
     buffer = io.BytesIO()
     pictures[0].save(buffer, format="GIF", save_all=True, append_images=pictures[1:], loop=0,
                      duration=gif_durations(len(pictures), frame_seconds))
@@ -443,7 +444,7 @@ def render_gif(motion: Motion, result: PipelineResult, *, start: float = 0.0, se
 
 
 def render_mp4(motion: Motion, result: PipelineResult, *, start: float = 0.0, seconds: float | None = None,
-               max_fps: float = MAX_FPS, height: int = 320) -> bytes:
+               max_fps: float = MAX_FPS, height: int = 320, skin: Skin | None = None) -> bytes:
     """The animation of `render_gif` as an H.264 MP4, encoded by ffmpeg (raw RGB piped in).
 
     ConfigError when ffmpeg is not on PATH; OSError with ffmpeg's message when it fails.
@@ -452,7 +453,7 @@ def render_mp4(motion: Motion, result: PipelineResult, *, start: float = 0.0, se
     if ffmpeg is None:
         raise ConfigError(NO_FFMPEG)
     frames, frame_seconds = animation_frames(motion, result, start=start, seconds=seconds, max_fps=max_fps)
-    pictures = render_frames(motion, result, frames, height=height)
+    pictures = render_frames(motion, result, frames, height=height, skin=skin)
     picture = next(pictures)
     with tempfile.TemporaryDirectory(prefix="mocap-preview-") as folder:
         target, messages = Path(folder) / "preview.mp4", Path(folder) / "ffmpeg.log"
@@ -605,7 +606,8 @@ def _kind(output: Path, trajectory: str | None) -> str:
 
 def write_preview(source, output: str | os.PathLike, config=None, *, frames: int = 5, overwrite: bool = False,
                   label: str | None = None, trajectory: str | None = None, start: float = 0.0,
-                  seconds: float | None = None, max_fps: float = MAX_FPS) -> Path:
+                  seconds: float | None = None, max_fps: float = MAX_FPS,
+                  skin: Skin | str | os.PathLike | None = None, joint_map: dict | None = None) -> Path:
     """Run the pipeline on a clip (path, bytes or stream) and write its preview to ``output``.
 
     By the suffix: ``.png`` the body at ``frames`` evenly spaced frames (`render_preview`), or
@@ -613,7 +615,9 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     an animation (`render_gif`); ``.mp4`` the same through ffmpeg (`render_mp4`). ``start``
     and ``seconds`` choose the part of the motion shown (default: all of it; an animation
     stops at `MAX_SECONDS`). The name, the joint and ffmpeg are checked and the target is
-    checked (never an input; taken only with ``overwrite``) before the clip is run.
+    checked (never an input; taken only with ``overwrite``) before the clip is run. ``skin``
+    (a `Skin` or a skin file, with ``joint_map`` for joints the pairing misses) is the body drawn,
+    bound to the clip as the GLB's is (`mocap_exaggerate.binding`); default: the capsule body.
     """
     from .config import load_preset
     from .io.bvh import read_bvh
@@ -623,23 +627,29 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
 
     output = Path(output)
     kind = _kind(output, trajectory)
-    inputs = [Path(source)] if isinstance(source, (str, os.PathLike)) and str(source) != "-" else []
+    inputs = [Path(p) for p in (source, skin) if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
     check_targets({"preview": output}, inputs, overwrite)
     config = config or load_preset("cartoon")
     motion, _ = read_bvh(source, name=label, fps=config.input.fps, root_offset=config.input.root_offset,
                          up=config.input.up)
     where = label or (str(source) if inputs else "the clip")
     joint = joint_named(motion.skeleton, trajectory, where) if trajectory is not None else None
+    if skin is not None:
+        from .binding import bind_skin
+        from .io.skin import check_skin, load_skin
+
+        skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
+        skin, _ = bind_skin(skin, motion.skeleton, joint_map)
     result = run(motion, config)
     if kind == ".gif":
-        data = render_gif(motion, result, start=start, seconds=seconds, max_fps=max_fps)
+        data = render_gif(motion, result, start=start, seconds=seconds, max_fps=max_fps, skin=skin)
     elif kind == ".mp4":
-        data = render_mp4(motion, result, start=start, seconds=seconds, max_fps=max_fps)
+        data = render_mp4(motion, result, start=start, seconds=seconds, max_fps=max_fps, skin=skin)
     elif joint is not None:
         data = render_trajectory(motion, result, joint, config,
                                  frames=preview_window(motion, result, start=start, seconds=seconds))
     else:
         begin, end = preview_window(motion, result, start=start, seconds=seconds)
-        data = render_preview(motion, result, at=list(np.linspace(begin, end - 1, frames).astype(int)))
+        data = render_preview(motion, result, at=list(np.linspace(begin, end - 1, frames).astype(int)), skin=skin)
     atomic_write(output, data, overwrite=True)
     return output

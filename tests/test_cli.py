@@ -250,7 +250,11 @@ def test_glb_options(runner, sample_clip, tmp_path):
     assert info["outputs"]["glb"] == "cmu_09_01_run_daz.glb" and info["outputs"]["units"] == "cm"
     result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "d"), "--influences", "8",
                                  "--skin", str(tmp_path / "b" / "cmu_09_01_run_daz.glb")])
-    assert result.exit_code == 2 and "bind pose" in result.stderr  # a rubber-skeleton GLB is no skin for this clip
+    # A GLB made from this clip on the rubber skeleton (in cm) is a character for it: bound by name, the
+    # sub-joints riding their links (`mocap_exaggerate.binding`).
+    assert result.exit_code == 0, result.stderr
+    binding = json.loads((tmp_path / "d" / "cmu_09_01_run_daz.json").read_text())["skin_binding"]
+    assert binding["by"]["name"] == 43 and binding["scale"] == pytest.approx(100.0, rel=1e-4)  # written in metres from cm
     for args, words in [(["--units", "furlong"], "units must be"), (["--skin", str(tmp_path / "none.npz")], "no such skin"),
                         (["--skin", str(sample_clip)], "skins are read from")]:
         result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "c"), *args])

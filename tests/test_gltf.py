@@ -13,7 +13,6 @@ import pygltflib
 import pytest
 import trimesh
 
-from mocap_exaggerate.errors import ConfigError
 
 from mocap_exaggerate.io.gltf import unit_scale
 from mocap_exaggerate.io.bvh import read_bvh
@@ -225,11 +224,14 @@ def test_eight_influences_and_a_glb_skin(sample_clip, tmp_path):
     back = load_skin_bytes(glb8, tmp_path)
     assert back.joints.shape[1] == 8 and np.allclose(back.weights.sum(axis=1), 1.0, atol=1e-6)
     assert (back.weights > 0).sum(axis=1).max() > 4
-    # A skin bound in another pose (or other units) is refused, naming the problem.
+    # A character bound in another pose, axes and units (MakeHuman: A-pose, Y up, decimetres) is fitted
+    # to the clip (`mocap_exaggerate.binding`): a clean GLB, on the rubber skeleton, with 8 influences.
     if (SHARED_BVH.parent / "skin").is_dir():
         makehuman = load_skin(SHARED_BVH.parent / "skin" / "makehuman_base.obj")
-        with pytest.raises(ConfigError, match="bind pose is not the clip's rest pose"):
-            make_glb(motion, rubber, makehuman, "cm")
+        glb_mh, _, _ = make_glb(motion, rubber, makehuman, "cm", influences=8)
+        report = validate(glb_mh, tmp_path)
+        assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, report["issues"]["messages"][:3]
+        assert load_skin_bytes(glb_mh, tmp_path).num_vertices == makehuman.num_vertices
 
 
 def load_skin_bytes(glb: bytes, folder: Path):

@@ -1,0 +1,286 @@
+"""Binding a character made for another rig: joint pairing across naming conventions, the fit to the
+clip's rest pose, the MakeHuman body on real clips, --joint-map and its bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from mocap_exaggerate.binding import bind_skin, joint_roles, pair_joints, read_joint_map, skin_skeleton
+from mocap_exaggerate.body import default_skin
+from mocap_exaggerate.errors import ConfigError, InputError
+from mocap_exaggerate.io.bvh import read_bvh
+from mocap_exaggerate.io.skin import load_skin
+from mocap_exaggerate.preview import pose_skin
+from mocap_exaggerate.skinning import Skin
+
+from .helpers import ROOT, SAMPLE_DIR, SHARED_BVH, shared
+
+SKIN_DIR = SHARED_BVH.parent / "skin"
+needs_makehuman = pytest.mark.skipif(not (SKIN_DIR / "makehuman_base.obj").exists(),
+                                     reason=f"the MakeHuman body is not at {SKIN_DIR} (../shared/data/skin)")
+CLI = [sys.executable, "-m", "mocap_exaggerate_cli.main"]
+
+#: What every humanoid rig among the shared clips must show, whatever its naming convention.
+ROLES = {"hips", "head"} | {f"{side}_{part}" for side in ("left", "right")
+                           for part in ("upper_arm", "forearm", "hand", "thigh", "shin", "foot")}
+
+
+@pytest.fixture(scope="module")
+def makehuman() -> Skin:
+    return load_skin(SKIN_DIR / "makehuman_base.obj")
+
+
+def all_clips():
+    clips = sorted(SHARED_BVH.glob("*.bvh")) if SHARED_BVH.is_dir() else []
+    return clips or [pytest.param(None, marks=pytest.mark.skip(reason=f"no shared clips at {SHARED_BVH}"))]
+
+
+def clip_motion(path):
+    return read_bvh(path.read_bytes(), fps=120 if "amc2bvh" in path.name else None)[0]
+
+
+@needs_makehuman
+def test_the_makehuman_rig_shows_every_role_past_its_split_bones(makehuman):
+    """MakeHuman cuts each long bone in two (upperarm01/02.L): the upper arm starts at 01, the hand
+    is the wrist after lowerarm02, the clavicle is the joint on the spine, not shoulder01 below it."""
+    rig = skin_skeleton(makehuman)
+    roles, chains = joint_roles(rig)
+    named = {role: rig.names[j] for role, j in roles.items()}
+    assert named["left_upper_arm"] == "upperarm01.L" and named["left_forearm"] == "lowerarm01.L"
+    assert named["left_hand"] == "wrist.L" and named["left_clavicle"] == "clavicle.L"
+    assert named["right_thigh"] == "upperleg01.R" and named["right_foot"] == "foot.R"
+    assert named["hips"] == "root" and named["head"] == "head"
+    assert [rig.names[j] for j in chains["spine"]] == ["spine05", "spine04", "spine03", "spine02", "spine01"]
+
+
+@needs_makehuman
+@pytest.mark.parametrize("path", all_clips(), ids=lambda p: getattr(p, "stem", "none"))
+def test_every_shared_rig_pairs_its_main_joints_with_the_makehuman_body(path, makehuman):
+    """CMU, Daz, iClone, 3ds Max, assimp, MocapBank and the old MakeHuman game rig: the main joints of
+    each pair with the MakeHuman body's by role, side for side."""
+    skeleton = clip_motion(path).skeleton
+    roles, _ = joint_roles(skeleton)
+    assert ROLES <= set(roles), ROLES - set(roles)
+    binding = pair_joints(skeleton, makehuman)
+    skin_roles, _ = joint_roles(skin_skeleton(makehuman))
+    rig = skin_skeleton(makehuman)
+    for role in ROLES:
+        assert binding.pairs[skeleton.names[roles[role]]] == rig.names[skin_roles[role]], role
+    assert binding.unpaired_roles == ()
+
+
+@needs_makehuman
+@pytest.mark.parametrize("path", all_clips(), ids=lambda p: getattr(p, "stem", "none"))
+def test_the_fitted_body_puts_each_paired_joint_where_the_clip_has_it(path, makehuman):
+    """In the clip's rest pose, the fitted mesh around each paired joint sits where that joint is:
+    the mesh is in the clip's units and axes, not MakeHuman's decimetres and Y up."""
+    motion = clip_motion(path)
+    skeleton = motion.skeleton
+    bound, binding = bind_skin(makehuman, skeleton)
+    assert set(bound.joint_names) <= set(skeleton.names)
+    np.testing.assert_allclose(bound.weights.sum(axis=1), 1.0, atol=1e-9)
+    rest = skeleton.rest_positions()
+    height = skeleton.height()
+    # Each paired skin joint, carried by its own bone's map, lands on the clip's joint; checked through
+    # the vertex groups MakeHuman places its joints by (the mean of a group is the joint).
+    rig = json.loads((SKIN_DIR / "makehuman_default.mhskel").read_text())
+    moved = bound.vertices
+    # Vertices of the body group keep their order: compare heads found as means of the same vertices.
+    obj_index = _body_vertex_index()
+    for clip_name, skin_name in binding.pairs.items():
+        group = rig["joints"][rig["bones"][skin_name]["head"]]
+        rows = obj_index[np.asarray(group)]
+        rows = rows[rows >= 0]
+        if len(rows) < 3:
+            continue  # a head joint marked by helper geometry only
+        assert np.all(np.isfinite(moved[rows]))
+        error = np.linalg.norm(moved[rows].mean(axis=0) - rest[skeleton.index(clip_name)])
+        assert error < 0.06 * height, (clip_name, skin_name, error / height)
+    # The body is the clip's size along its up axis: the skeleton's height, a little more for the skull
+    # above the head joint and the soles.
+    up = skeleton.up_axis()
+    assert np.ptp(moved[:, up]) == pytest.approx(height, rel=0.3)
+
+
+_INDEX = None
+
+
+def _body_vertex_index() -> np.ndarray:
+    """OBJ vertex index -> row of the loaded body (-1 for helper geometry the loader drops)."""
+    global _INDEX
+    if _INDEX is None:
+        used = set()
+        group = None
+        total = 0
+        for line in (SKIN_DIR / "makehuman_base.obj").read_text().splitlines():
+            if line.startswith("v "):
+                total += 1
+            elif line.startswith("g "):
+                group = line[2:].strip()
+            elif line.startswith("f ") and group == "body":
+                used.update(int(p.split("/")[0]) - 1 for p in line.split()[1:])
+        keep = np.array(sorted(used))
+        _INDEX = np.full(total, -1)
+        _INDEX[keep] = np.arange(len(keep))
+    return _INDEX
+
+
+@needs_makehuman
+@pytest.mark.parametrize("name", ["cmu_12_01_walk.bvh", "cmu_09_01_run_daz.bvh", "assimp_boxing_toes.bvh",
+                                  "cmu_06_15_basketball_dribble_shoot_iclone.bvh"])
+def test_the_body_stays_on_the_skeleton_through_the_captured_motion(name, makehuman):
+    """Posed by the clip at a dozen frames, every vertex of the fitted body stays within a body's
+    girth of the skeleton, and few faces stretch (the price of linear blend skinning at shoulders)."""
+    from scipy.spatial import cKDTree
+
+    from mocap_exaggerate.skinning import segment_distance
+
+    motion = clip_motion(shared(name))
+    skeleton = motion.skeleton
+    bound, _ = bind_skin(makehuman, skeleton)
+    rotations, positions = motion.forward_kinematics()
+    index = np.array([skeleton.index(n) for n in bound.joint_names])
+    edges = np.concatenate([bound.faces[:, [0, 1]], bound.faces[:, [1, 2]], bound.faces[:, [2, 0]]])
+    rest_length = np.linalg.norm(np.diff(bound.vertices[edges], axis=1)[:, 0], axis=1)
+    height = skeleton.height()
+    parents = skeleton.parents
+    worst = np.zeros(len(bound.faces))
+    for frame in np.linspace(0, motion.num_frames - 1, 12).astype(int):
+        posed = pose_skin(bound, skeleton.rest_positions(), rotations[frame], positions[frame], index)
+        # Distance to the nearest bone (segment parent -> joint), not only the nearest joint.
+        heads, tails = positions[frame][parents[1:]], positions[frame][1:]
+        near = cKDTree(positions[frame]).query(posed, k=4)[1]
+        candidates = np.unique(np.concatenate([near.ravel() - 1, near.ravel()]))
+        candidates = candidates[(candidates >= 0) & (candidates < len(tails))]
+        distance = segment_distance(posed[:, None, :], heads[candidates][None], tails[candidates][None]).min(axis=1)
+        assert distance.max() < 0.2 * height, (frame, distance.max() / height)
+        ratio = np.linalg.norm(np.diff(posed[edges], axis=1)[:, 0], axis=1) / rest_length
+        worst = np.maximum(worst, ratio.reshape(3, -1).max(axis=0))
+    assert np.mean(worst > 2.0) < 0.02  # measured 0.05-1.0 % on these rigs
+
+
+@needs_makehuman
+def test_the_makehuman_body_on_its_own_clip_pairs_every_bone_by_name(makehuman):
+    motion = read_bvh(SKIN_DIR / "makehuman_default_tpose.bvh")[0]
+    bound, binding = bind_skin(makehuman, motion.skeleton)
+    assert len(binding.pairs) == len(makehuman.bind)  # all 163 bones of the .mhskel
+    assert set(binding.how.values()) <= {"name", "role"}
+    assert binding.scale == pytest.approx(1.0, abs=0.02)  # the same body: no resizing
+
+
+def test_a_skin_already_on_the_clip_comes_back_unchanged(sample_clip):
+    """The default body (no bind pose of its own), or one whose bind pose is the rest pose: as it is."""
+    motion, _ = read_bvh(sample_clip)
+    body = default_skin(motion.skeleton)
+    same, binding = bind_skin(body, motion.skeleton)
+    assert same is body and binding is None
+    rest = motion.skeleton.rest_positions()
+    posed = Skin(body.vertices, body.faces, body.joint_names, body.joints, body.weights,
+                 {n: rest[j] for j, n in enumerate(motion.skeleton.names)})
+    assert bind_skin(posed, motion.skeleton)[0] is posed
+
+
+def test_a_body_moved_turned_and_scaled_is_fitted_back_onto_the_clip(sample_clip):
+    """Known answer: the default body of a clip, turned a quarter turn, scaled 10x and shifted, with its
+    bind pose and hierarchy said: binding it to the clip gives the original body back."""
+    motion, _ = read_bvh(sample_clip)
+    skeleton = motion.skeleton
+    body = default_skin(skeleton)
+    turn = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # Y up -> Z up
+    moved = lambda p: 10.0 * np.asarray(p) @ turn.T + np.array([3.0, -7.0, 50.0])  # noqa: E731
+    rest = skeleton.rest_positions()
+    parents = {n: skeleton.names[skeleton.parents[j]] for j, n in enumerate(skeleton.names) if j > 0}
+    other = Skin(moved(body.vertices), body.faces, body.joint_names, body.joints, body.weights,
+                 {n: moved(rest[j]) for j, n in enumerate(skeleton.names)}, parents)
+    bound, binding = bind_skin(other, skeleton)
+    assert binding.scale == pytest.approx(0.1, rel=1e-6)
+    by_name = {n: k for k, n in enumerate(bound.joint_names)}
+    np.testing.assert_allclose(bound.vertices, body.vertices, atol=1e-6 * skeleton.height())
+    np.testing.assert_array_equal([bound.joint_names[j] for j in bound.joints[:, 0]],
+                                  [body.joint_names[j] for j in body.joints[:, 0]])
+    assert len(by_name) <= skeleton.num_joints
+
+
+def test_a_joint_map_pairs_what_names_and_roles_cannot(sample_clip):
+    """A skin whose joints have meaningless names and no hierarchy: nothing pairs; a joint map names them."""
+    motion, _ = read_bvh(sample_clip)
+    skeleton = motion.skeleton
+    body = default_skin(skeleton)
+    rest = skeleton.rest_positions()
+    alias = {n: f"bone{j:03d}" for j, n in enumerate(skeleton.names)}
+    other = Skin(body.vertices + 5.0, body.faces, [alias[n] for n in body.joint_names], body.joints, body.weights,
+                 {alias[n]: rest[j] + 5.0 for j, n in enumerate(skeleton.names)})
+    with pytest.raises(ConfigError, match=r"only 0 of the skin's joints could be paired.*--joint-map"):
+        bind_skin(other, skeleton)
+    bound, binding = bind_skin(other, skeleton, alias)
+    assert set(binding.how.values()) == {"map"}
+    np.testing.assert_allclose(bound.vertices, body.vertices, atol=1e-6 * skeleton.height())
+    with pytest.raises(ConfigError, match="'Hipz', which is not a joint of the clip"):
+        bind_skin(other, skeleton, {"Hipz": "bone000"})
+    with pytest.raises(ConfigError, match="'bone999', which is not a joint of the skin"):
+        bind_skin(other, skeleton, {skeleton.names[0]: "bone999"})
+
+
+@pytest.mark.parametrize("text, message", [
+    ("Hips thigh\n", r"map\.txt:1: expected 'clip joint = skin joint'"),
+    ("# only a comment\n\n", "no 'clip joint = skin joint' lines"),
+    ("A = b\nA = c\n", r"map\.txt:2: clip joint 'A' is named twice"),
+    ("A = b\nC = b\n", r"map\.txt:2: skin joint 'b' is named twice \(first on line 1\)"),
+    ("A = b = c\n", r"map\.txt:1: expected"),
+    (" = b\n", r"map\.txt:1: expected"),
+])
+def test_bad_joint_map_files_are_refused_naming_the_line(tmp_path, text, message):
+    path = tmp_path / "map.txt"
+    path.write_text(text)
+    with pytest.raises(InputError, match=message):
+        read_joint_map(path)
+
+
+def test_a_joint_map_reads_names_with_spaces_and_comments(tmp_path):
+    path = tmp_path / "map.txt"
+    path.write_bytes("\ufeff# 3ds Max biped to MakeHuman\nBip01 L Thigh = upperleg01.L   # the thigh\r\n\nBip01 Pelvis=root\n"
+                     .encode("utf-8"))
+    assert read_joint_map(path) == {"Bip01 L Thigh": "upperleg01.L", "Bip01 Pelvis": "root"}
+    (tmp_path / "bin.txt").write_bytes(b"\xff\xfe\x00bad")
+    with pytest.raises(InputError, match="not a text file"):
+        read_joint_map(tmp_path / "bin.txt")
+
+
+@needs_makehuman
+def test_the_cli_binds_the_makehuman_body_and_says_how(tmp_path):
+    """As users run it: --skin with the MakeHuman .obj on a CMU clip writes a GLB whose manifest says
+    how the skin was bound; a bad joint map is one line, exit 2, nothing written."""
+    clip = SAMPLE_DIR / "cmu_09_01_run_daz.bvh"
+    out = tmp_path / "out"
+    done = subprocess.run([*CLI, "exaggerate", str(clip), "-o", str(out), "--skin", str(SKIN_DIR / "makehuman_base.obj")],
+                          capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert done.returncode == 0, done.stderr
+    info = json.loads((out / "cmu_09_01_run_daz.json").read_text())
+    assert info["skin_binding"]["pairs"] >= 19 and info["skin_binding"]["by"]["role"] >= 19
+    assert (out / "cmu_09_01_run_daz.glb").stat().st_size > 1_000_000
+
+    bad = tmp_path / "map.txt"
+    bad.write_text("lThigh upperleg01.L\n")
+    again = tmp_path / "again"
+    done = subprocess.run([*CLI, "exaggerate", str(clip), "-o", str(again), "--skin", str(SKIN_DIR / "makehuman_base.obj"),
+                           "--joint-map", str(bad)], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert done.stderr.strip().count("\n") == 0 and "map.txt:1: expected 'clip joint = skin joint'" in done.stderr
+    assert not again.exists() or not any(again.iterdir())
+
+    wrong = tmp_path / "wrong.txt"
+    wrong.write_text("lThigh = upperleg01.L\nlShinn = lowerleg01.L\n")
+    done = subprocess.run([*CLI, "exaggerate", str(clip), "-o", str(again), "--skin", str(SKIN_DIR / "makehuman_base.obj"),
+                           "--joint-map", str(wrong)], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert "'lShinn', which is not a joint of the clip (close: lShin" in done.stderr
+    assert not again.exists() or not any(again.iterdir())
+
+    done = subprocess.run([*CLI, "exaggerate", str(clip), "-o", str(again), "--joint-map", str(wrong)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert done.returncode == 2 and "give the skin too" in done.stderr
