@@ -122,3 +122,36 @@ def test_blender_stands_a_z_up_clip_upright_on_the_floor(tmp_path):
         assert heads["Head"][1] > max(heads["Foot_L"][1], heads["Foot_R"][1]) + 0.6 * height, frame
         assert abs(mesh[:, 1].min()) < 0.02 * height, (frame, mesh[:, 1].min(), height)
         assert mesh[:, 1].max() > 0.85 * height, frame
+
+
+@needs_blender
+@pytest.mark.parametrize("clip", ["cmu_09_01_run_daz.bvh", "makehuman_default_tpose.bvh"])
+def test_blender_deforms_the_makehuman_body_bound_to_a_clip_along_its_skeleton(clip, tmp_path):
+    """The MakeHuman body (A-pose, Y up, decimetres) with --skin on a CMU clip and on its own one:
+    Blender imports the GLB and, at every checked frame, every vertex of the deformed body lies
+    within a body's girth of the skeleton Blender poses, and the body is as tall as the skeleton."""
+    from scipy.spatial import cKDTree
+
+    from mocap_exaggerate.job import convert
+
+    from .helpers import SHARED_BVH
+
+    skin_dir = SHARED_BVH.parent / "skin"
+    if not (skin_dir / "makehuman_base.obj").exists():
+        pytest.skip(f"the MakeHuman body is not at {skin_dir}")
+    path = SAMPLE_DIR / clip if (SAMPLE_DIR / clip).exists() else skin_dir / clip
+    record = convert(path, tmp_path, skin=skin_dir / "makehuman_base.obj")
+    motion, _ = read_bvh(path)
+    frames = sorted({0, motion.num_frames // 3, (2 * motion.num_frames) // 3})
+    done = subprocess.run([BPY, str(GLB_SCRIPT), str(record.outputs["glb"]), str(motion.fps), *map(str, frames)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    seen = json.loads(next(l for l in done.stdout.splitlines() if l.startswith("JSON:"))[5:])
+    assert seen["vertices"] > 10_000  # the MakeHuman body, not the capsule body
+    for frame in map(str, frames):
+        mesh = np.array(seen["meshes"][frame])
+        heads = np.array(list(seen["heads"][frame].values()))
+        height = np.ptp(heads[:, 1])  # glTF's Y up: the skeleton as Blender poses it
+        distance, _ = cKDTree(heads).query(mesh)
+        assert distance.max() < 0.15 * height, (frame, distance.max() / height)
+        assert np.ptp(mesh[:, 1]) == pytest.approx(height, rel=0.25), frame
