@@ -367,7 +367,7 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
         overwrite=overwrite,
         glb=write_glb,
         skin=skin_path,
-        joint_map=_joint_map(skin_path, joint_map_path) if write_glb else None,
+        joint_map=_joint_map(skin_path, joint_map_path),
         units=units,
         influences=int(influences),
         trails=trails_path,
@@ -420,7 +420,8 @@ def _batch_options(options: dict[str, Any], *, overwrite: bool, resume: bool, wr
     from mocap_exaggerate.batch import BatchOptions
 
     preset, config = _config_from_options(options)
-    joint_map = _check_output_settings(units, influences, skin_path, joint_map_path) if write_glb else None
+    joint_map = (_check_output_settings(units, influences, skin_path, joint_map_path) if write_glb
+                 else _joint_map(skin_path, joint_map_path))
     return BatchOptions(config, preset=preset, overwrite=overwrite, resume=resume, glb=write_glb,
                         skin=str(skin_path.resolve()) if skin_path is not None else None, joint_map=joint_map,
                         units=units, influences=int(influences))

@@ -57,6 +57,7 @@ _TRUNK = re.compile(r"^(hips|pelvis|spine\d+|neck\d+|head|(left|right)_(clavicle
 # LHipJoint) to beside the thigh (Daz's lButtock), so a bone fitted to it would crush or tear the buttock.
 _UNPAIRED = ("left_hip", "right_hip")
 _SEGMENT = re.compile(r"\d+")
+_SUBJOINT = re.compile(r"^(.*)_s\d+$")
 _HELPER = re.compile(r"twist|share|roll|bend|helper|corrective|adjust|nub|end$", re.IGNORECASE)
 AXIAL_LIMIT = 2.0  # a bone stretches or shrinks at most this much beyond the overall scale
 
@@ -127,6 +128,8 @@ def joint_roles(skeleton: Skeleton) -> tuple[dict[str, int], dict[str, list[int]
     """
     if skeleton.num_joints < 3:
         return {}, {}
+    from .limbs import _common_ancestor
+
     limbs = find_limbs(skeleton)
     roles: dict[str, int] = {}
     parents = skeleton.parents
@@ -158,8 +161,6 @@ def joint_roles(skeleton: Skeleton) -> tuple[dict[str, int], dict[str, list[int]
             chains["neck"] = list(neck.joints[:-1])
             roles["head"] = neck.end
         if "left_thigh" in roles and "right_thigh" in roles:
-            from .limbs import _common_ancestor
-
             pelvis = _common_ancestor(skeleton, roles["left_thigh"], roles["right_thigh"])
             for side in ("left", "right"):  # a hip joint that is the pelvis itself is no side's own
                 if roles.get(f"{side}_hip") == pelvis:
@@ -188,11 +189,21 @@ def skin_skeleton(skin: Skin) -> Skeleton | None:
 
     Joints are listed parents first; several roots hang under one added root at the first's place.
     """
-    names = [n for n in skin.bind]
+    every = set(skin.bind)
+    # The sub-joints of a GLB this tool wrote (``lShin_s1`` on the link that ends at lShin) are pieces of
+    # their link, not joints of the rig: left out, they ride (and give their weight to) the joint above.
+    names = [n for n in skin.bind if not (_SUBJOINT.match(n) and _SUBJOINT.match(n).group(1) in every)]
     if len(names) < 3 or not skin.parents:
         return None
     known = set(names)
-    parent_of = {n: (skin.parents.get(n) if skin.parents.get(n) in known else None) for n in names}
+
+    def kept_parent(name: str) -> str | None:
+        up = skin.parents.get(name)
+        while up is not None and up not in known:
+            up = skin.parents.get(up) if up in every else None
+        return up
+
+    parent_of = {n: kept_parent(n) for n in names}
     children: dict[str | None, list[str]] = {}
     for n in names:
         children.setdefault(parent_of[n], []).append(n)
@@ -264,67 +275,80 @@ def _close(name: str, names) -> str:
     return f" (close: {', '.join(close)})" if close else ""
 
 
-def pair_joints(clip: Skeleton, skin: Skin, joint_map: dict[str, str] | None = None) -> Binding:
-    """Pairs of clip and skin joints by the user's map, then by role, then by name (see module notes)."""
+def _chain_fractions(skeleton: Skeleton, roles: dict, chains: dict, chain: str) -> np.ndarray:
+    """Where each joint of the spine (neck) chain sits along it, measured from the joint below the
+    chain (hips; the neck base itself) to the one above (neck base; head)."""
+    joints = chains[chain]
+    below = roles.get("hips") if chain == "spine" else None
+    above = (chains["neck"][0] if chains.get("neck") else None) if chain == "spine" else roles.get("head")
+    full = ([below] if below is not None else []) + joints + ([above] if above is not None else [])
+    return _arc_fractions(skeleton.rest_positions(), full)[1 if below is not None else 0:][:len(joints)]
+
+
+#: Roles every humanoid shows; one left unpaired is reported (toes, clavicles and the pelvis may be missing).
+_MAIN_ROLES = re.compile(r"^(hips|head|(left|right)_(upper_arm|forearm|hand|thigh|shin|foot))$")
+
+
+def pair_joints(clip: Skeleton, skin: Skin, joint_map: dict[str, str] | None = None,
+                roles: tuple[dict, dict] | None = None) -> Binding:
+    """Pairs of clip and skin joints by the user's map, then by role, then by name (see module notes).
+
+    roles : `joint_roles` of the clip, when the caller has it already
+    """
+    if joint_map and not skin.bind:
+        raise ConfigError("a joint map pairs joints by where they sit, and this skin (an .npz) has no bind pose "
+                          "of its own: bind it to the clip's joints in its rest pose, or bring a GLB or MakeHuman "
+                          "character")
     pairs: dict[str, str] = {}
     how: dict[str, str] = {}
-    bound = set(skin.bind)
+    known = set(skin.bind)
+    clip_names = set(clip.names)
     for clip_name, skin_name in (joint_map or {}).items():
-        if clip_name not in clip.names:
+        if clip_name not in clip_names:
             raise ConfigError(f"the joint map names {clip_name!r}, which is not a joint of the clip"
                               f"{_close(clip_name, clip.names)}")
-        if skin_name not in bound:
+        if skin_name not in known:
             raise ConfigError(f"the joint map names {skin_name!r}, which is not a joint of the skin"
-                              f"{_close(skin_name, bound)}")
+                              f"{_close(skin_name, known)}")
         pairs[clip_name], how[clip_name] = skin_name, "map"
+    taken = set(pairs.values())
 
     def add(clip_name: str, skin_name: str, kind: str) -> None:
-        if clip_name not in pairs and skin_name not in pairs.values() and skin_name in bound:
+        if clip_name not in pairs and skin_name not in taken and skin_name in known:
             pairs[clip_name], how[clip_name] = skin_name, kind
+            taken.add(skin_name)
 
     # A skin made for the clip's own rig family (most names shared) pairs by name first: the roles
     # would only pick the same joints, or worse (a toe below a metatarsal). Otherwise roles come first:
     # the same name can mean another joint in another convention (3ds Max's LeftShoulder is CMU's LeftArm).
-    same = [n for n in clip.names if n in bound]
-    if len(same) >= 0.5 * min(clip.num_joints, len(bound)):
+    same = [n for n in clip.names if n in known]
+    if len(same) >= 0.5 * min(clip.num_joints, len(known)):
         for name in same:
             add(name, name, "name")
+    clip_roles, clip_chains = roles if roles is not None else joint_roles(clip)
     rig = skin_skeleton(skin)
-    unpaired: list[str] = []
     if rig is not None:
-        clip_roles, clip_chains = joint_roles(clip)
         skin_roles, skin_chains = joint_roles(rig)
         for role, j in clip_roles.items():
-            if role in _UNPAIRED:
-                continue
-            if role in skin_roles:
+            if role not in _UNPAIRED and role in skin_roles:
                 add(clip.names[j], rig.names[skin_roles[role]], "role")
-            elif not role.endswith(("toe", "_hip", "pelvis", "clavicle")):
-                unpaired.append(role)
         for chain in ("spine", "neck"):
             ours, theirs = clip_chains.get(chain), skin_chains.get(chain)
             if not ours or not theirs:
                 continue
-            # Each clip joint of the chain takes the skin joint nearest its place along it, measured
-            # from the joint below the chain (hips, neck base) to the one above (neck base, head).
-            ends = {"spine": ("hips", "neck"), "neck": (None, "head")}[chain]
-            def span(skeleton, roles, chains, joints):
-                below = roles.get(ends[0]) if ends[0] else None
-                above = (chains["neck"][0] if chains.get("neck") else None) if ends[1] == "neck" else roles.get("head")
-                full = ([below] if below is not None else []) + joints + ([above] if above is not None else [])
-                return _arc_fractions(skeleton.rest_positions(), full)[1 if below is not None else 0:][:len(joints)]
-            at = span(clip, clip_roles, clip_chains, ours)
-            their_at = span(rig, skin_roles, skin_chains, theirs)
+            # Each clip joint of the chain takes the free skin joint nearest its place along it.
+            at = _chain_fractions(clip, clip_roles, clip_chains, chain)
+            their_at = _chain_fractions(rig, skin_roles, skin_chains, chain)
             for j, f in sorted(zip(ours, at), key=lambda pair: pair[1]):
-                free = [k for k in range(len(theirs)) if rig.names[theirs[k]] not in pairs.values()]
+                free = [k for k in range(len(theirs)) if rig.names[theirs[k]] not in taken]
                 if free:
                     k = min(free, key=lambda k: abs(their_at[k] - f))
                     if abs(their_at[k] - f) <= 0.35:
                         add(clip.names[j], rig.names[theirs[k]], "role")
-    for name in clip.names:
-        if name in bound:
-            add(name, name, "name")
-    return Binding(pairs, how, 1.0, tuple(unpaired))
+    for name in same:  # what is left of the same names (fingers, when the roles came first)
+        add(name, name, "name")
+    unpaired = tuple(role for role, j in clip_roles.items() if _MAIN_ROLES.match(role) and clip.names[j] not in pairs)
+    return Binding(pairs, how, 1.0, unpaired)
 
 
 def needs_binding(skin: Skin, clip: Skeleton, joint_map: dict | None = None) -> bool:
@@ -334,11 +358,11 @@ def needs_binding(skin: Skin, clip: Skeleton, joint_map: dict | None = None) -> 
         return True
     if not skin.bind:
         return False
-    if any(n not in clip.names for n in skin.joint_names):
+    if any(n not in clip._index for n in skin.joint_names):
         return True
     rest = clip.rest_positions()
     off = [np.linalg.norm(np.asarray(p, dtype=np.float64) - rest[clip.index(n)]) for n, p in skin.bind.items()
-           if n in clip.names]
+           if n in clip._index]
     return not off or max(off) > 1e-3 * clip.height()
 
 
@@ -368,7 +392,8 @@ def bind_skin(skin: Skin, clip: Skeleton, joint_map: dict[str, str] | None = Non
     """
     if not needs_binding(skin, clip, joint_map):
         return skin, None
-    binding = pair_joints(clip, skin, joint_map)
+    roles, chains = joint_roles(clip)
+    binding = pair_joints(clip, skin, joint_map, (roles, chains))
     if len(binding.pairs) < 3:
         shown = ", ".join(list(skin.bind)[:6]) + (", ..." if len(skin.bind) > 6 else "")
         raise ConfigError(
@@ -376,69 +401,15 @@ def bind_skin(skin: Skin, clip: Skeleton, joint_map: dict[str, str] | None = Non
             f"{len(skin.bind)}: {shown}; the clip's root is {clip.names[0]}); name the pairs in a --joint-map "
             "file, one 'clip joint = skin joint' a line")
     rest = clip.rest_positions()
+    height = clip.height()
     clip_index = np.array([clip.index(c) for c in binding.pairs], dtype=np.int64)
     bind = np.array([np.asarray(skin.bind[s], dtype=np.float64) for s in binding.pairs.values()])
-    roles, _ = joint_roles(clip)
-    by_joint = {j: r for r, j in roles.items()}
-    chains = joint_roles(clip)[1]
-    for k, j in enumerate(chains.get("spine", []) + chains.get("neck", [])):
-        by_joint.setdefault(j, f"spine{k}")
-    trunk = np.array([bool(_TRUNK.match(by_joint.get(int(j), ""))) for j in clip_index])
-    use = trunk if trunk.sum() >= 3 and np.linalg.matrix_rank(rest[clip_index[trunk]] - rest[clip_index[trunk]].mean(0),
-                                                             tol=1e-6 * clip.height()) >= 2 else np.ones(len(bind), bool)
-    scale, rotation, shift = _similarity(bind[use], rest[clip_index[use]])
-    if not (np.isfinite(scale) and scale > 0):
-        raise ConfigError("the skin's paired joints all sit in one place; the skin cannot be placed over the clip")
+    scale, rotation, shift = _placement(skin, bind, rest[clip_index], clip_index, roles, chains, height)
     placed = bind @ (scale * rotation).T + shift
+    affine = _bone_maps(clip, rest, clip_index, placed, roles, chains)
 
-    # One affine map per clip joint: linear part and where it takes the paired skin joint.
-    num = clip.num_joints
-    linear = np.zeros((num, 3, 3))
-    turns = np.zeros((num, 3, 3))
-    has = np.zeros(num, bool)
-    source = np.zeros((num, 3))
-    source[clip_index] = placed
-    has_pair = np.zeros(num, bool)
-    has_pair[clip_index] = True
-    paired_parent = np.full(num, -1)
-    for j in range(1, num):
-        p = int(clip.parents[j])
-        paired_parent[j] = p if has_pair[p] else paired_parent[p]
-    central = [roles["hips"]] if "hips" in roles else []
-    central += chains.get("spine", []) + chains.get("neck", []) + ([roles["head"]] if "head" in roles else [])
-    central = [j for j in central if has_pair[j]]
-    floor = 1e-2 * clip.height()
-    for j in range(num):
-        if not has_pair[j]:
-            continue
-        kids = [c for c in range(num) if has_pair[c] and paired_parent[c] == j]
-        if j in central and central.index(j) + 1 < len(central):
-            kids = central[central.index(j) + 1:]  # up the trunk, past joints that sit on this one
-        elif len(kids) > 1:
-            incoming = rest[j] - rest[paired_parent[j]] if paired_parent[j] >= 0 else None
-            if incoming is not None and np.linalg.norm(incoming) > 0:
-                kids.sort(key=lambda c: -np.dot(rest[c] - rest[j], incoming) / max(np.linalg.norm(rest[c] - rest[j]), 1e-300))
-            else:
-                kids.sort(key=lambda c: -len(clip.descendants(c)))
-        for c in kids:
-            there, here = rest[c] - rest[j], source[c] - source[j]
-            if np.linalg.norm(there) > floor and np.linalg.norm(here) > floor:
-                axis = here / np.linalg.norm(here)
-                stretch = np.clip(np.linalg.norm(there) / np.linalg.norm(here), 1 / AXIAL_LIMIT, AXIAL_LIMIT)
-                turns[j] = quat_to_matrix(quat_between(here, there))
-                linear[j] = turns[j] @ (np.eye(3) + (stretch - 1.0) * np.outer(axis, axis))
-                has[j] = True
-                break
-    for j in range(num):  # a bone with no paired joint below it (a head, a hand) turns as the one above, unstretched
-        if has_pair[j] and not has[j]:
-            p = paired_parent[j]
-            turns[j] = turns[p] if p >= 0 else np.eye(3)
-            linear[j] = turns[j]
-            has[j] = True
-    # y -> rest[j] + linear[j] @ (y - source[j]) as a 3x4 matrix
-    affine = np.concatenate([linear, (rest - np.einsum("jab,jb->ja", linear, source))[:, :, None]], axis=2)
-
-    # Every skin joint's weight goes to its partner, else its nearest paired ancestor, else the nearest paired joint.
+    # Every skin joint's weight goes to its partner, else its nearest paired ancestor, else the
+    # nearest paired joint (or, with no place to go by, the paired joint nearest the clip's root).
     partner = {s: clip.index(c) for c, s in binding.pairs.items()}
     target = np.empty(len(skin.joint_names), dtype=np.int64)
     for k, name in enumerate(skin.joint_names):
@@ -451,16 +422,120 @@ def bind_skin(skin: Skin, clip: Skeleton, joint_map: dict[str, str] | None = Non
             near = np.argmin(np.linalg.norm(bind - np.asarray(skin.bind[name], dtype=np.float64), axis=1))
             target[k] = clip_index[near]
         else:
-            target[k] = clip_index[0]
+            target[k] = clip_index.min()
     joints = target[skin.joints]
     vertices = skin.vertices @ (scale * rotation).T + shift
     blended = np.einsum("vk,vkab->vab", skin.weights, affine[joints])
     vertices = np.einsum("vab,vb->va", blended[:, :, :3], vertices) + blended[:, :, 3]
-    rows = np.repeat(np.arange(skin.num_vertices), skin.joints.shape[1])
-    used = np.unique(joints[skin.weights > 0])
-    column = np.full(num, -1)
+    weighted = skin.weights > 0
+    rows = np.repeat(np.arange(skin.num_vertices), skin.joints.shape[1]).reshape(skin.joints.shape)[weighted]
+    used = np.unique(joints[weighted])
+    column = np.full(clip.num_joints, -1)
     column[used] = np.arange(len(used))
-    top_j, top_w = top_influences(rows, column[joints].ravel(), skin.weights.ravel(), skin.num_vertices,
+    top_j, top_w = top_influences(rows, column[joints[weighted]], skin.weights[weighted], skin.num_vertices,
                                   skin.joints.shape[1])
-    bound = Skin(vertices, skin.faces, tuple(clip.names[j] for j in used), top_j, top_w)
-    return bound, Binding(binding.pairs, binding.how, scale, binding.unpaired_roles)
+    fitted = Skin(vertices, skin.faces, tuple(clip.names[j] for j in used), top_j, top_w)
+    return fitted, Binding(binding.pairs, binding.how, scale, binding.unpaired_roles)
+
+
+def _placement(skin: Skin, bind: np.ndarray, rest: np.ndarray, clip_index: np.ndarray, roles: dict, chains: dict,
+               height: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """The similarity placing the character over the clip, fitted to the paired trunk joints (all pairs
+    when fewer than three trunk joints span a plane). ConfigError when the pairs cannot place it."""
+    by_joint = {j: r for r, j in roles.items()}
+    for k, j in enumerate(chains.get("spine", []) + chains.get("neck", [])):
+        by_joint.setdefault(j, f"spine{k}")
+    trunk = np.array([bool(_TRUNK.match(by_joint.get(int(j), ""))) for j in clip_index])
+
+    def spans_a_plane(points: np.ndarray, size: float) -> bool:
+        return len(points) >= 3 and np.linalg.matrix_rank(points - points.mean(axis=0), tol=1e-3 * size) >= 2
+
+    use = trunk if spans_a_plane(rest[trunk], height) else np.ones(len(bind), bool)
+    size = float(np.ptp(skin.vertices, axis=0).max()) or 1.0
+    if np.ptp(bind[use], axis=0).max() <= 1e-6 * size:
+        raise ConfigError("the skin's paired joints all sit in one place, so the skin cannot be placed over the "
+                          "clip (are its inverse bind matrices or joint positions all the same?)")
+    if not (spans_a_plane(rest[use], height) and spans_a_plane(bind[use], size)):
+        raise ConfigError(f"the {int(use.sum())} paired joints lie on one line, so the skin's turn about it is "
+                          "unknown: pair more joints (arms, legs) in a --joint-map file")
+    return _similarity(bind[use], rest[use])
+
+
+def _bone_maps(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed: np.ndarray, roles: dict,
+               chains: dict) -> np.ndarray:
+    """One affine map ``(J, 3, 4)`` per clip joint taking the placed skin onto the clip's rest pose.
+
+    A paired joint's map takes its skin joint onto the clip's and turns (the smallest turn) and
+    stretches (along the bone, 0.5-2x) the bone to the next paired joint up the trunk or down the
+    limb onto the clip's. Where a joint branches (hips to spine and thighs, chest to neck and
+    collars), the map is then fitted to every branch by least squares, held near that turn and
+    stretch in the directions the branches do not span, so each branch's start lands where the
+    clip has it and the mesh between them does not tear. A joint with no paired joint below it
+    (a head, a hand) turns as its parent, unstretched.
+    """
+    num = clip.num_joints
+    source = np.zeros((num, 3))
+    source[clip_index] = placed
+    has_pair = np.zeros(num, bool)
+    has_pair[clip_index] = True
+    paired_parent = np.full(num, -1)
+    below: dict[int, list[int]] = {}
+    for j in range(1, num):
+        p = int(clip.parents[j])
+        paired_parent[j] = p if has_pair[p] else paired_parent[p]
+        if has_pair[j] and paired_parent[j] >= 0:
+            below.setdefault(int(paired_parent[j]), []).append(j)
+    central = [roles["hips"]] if "hips" in roles else []
+    central += chains.get("spine", []) + chains.get("neck", []) + ([roles["head"]] if "head" in roles else [])
+    central = [j for j in central if has_pair[j]]
+    floor = 1e-2 * clip.height()
+    sizes = np.zeros(num, dtype=np.int64)
+    for j in range(num - 1, 0, -1):
+        sizes[j] += 1
+        sizes[clip.parents[j]] += sizes[j]
+
+    def usable(j: int, c: int) -> bool:
+        return np.linalg.norm(rest[c] - rest[j]) > floor and np.linalg.norm(source[c] - source[j]) > floor
+
+    linear = np.tile(np.eye(3), (num, 1, 1))
+    turns = np.tile(np.eye(3), (num, 1, 1))
+    fitted = np.zeros(num, bool)
+    for j in map(int, clip_index[np.argsort(clip_index)]):
+        kids = list(below.get(j, []))
+        if j in central and central.index(j) + 1 < len(central):
+            ahead = central[central.index(j) + 1:]  # up the trunk, past joints that sit on this one
+            primary = next((c for c in ahead if usable(j, c)), None)
+            branches = [c for c in kids if c not in central]
+        else:
+            incoming = rest[j] - rest[paired_parent[j]] if paired_parent[j] >= 0 else None
+            if incoming is not None and np.linalg.norm(incoming) > 0:
+                kids.sort(key=lambda c: -np.dot(rest[c] - rest[j], incoming) / max(np.linalg.norm(rest[c] - rest[j]), 1e-300))
+            else:
+                kids.sort(key=lambda c: -sizes[c])
+            primary = next((c for c in kids if usable(j, c)), None)
+            branches = kids
+        if primary is None:
+            continue
+        there, here = rest[primary] - rest[j], source[primary] - source[j]
+        axis = here / np.linalg.norm(here)
+        stretch = np.clip(np.linalg.norm(there) / np.linalg.norm(here), 1 / AXIAL_LIMIT, AXIAL_LIMIT)
+        turns[j] = quat_to_matrix(quat_between(here, there))
+        linear[j] = turns[j] @ (np.eye(3) + (stretch - 1.0) * np.outer(axis, axis))
+        fitted[j] = True
+        others = [c for c in branches if c != primary and usable(j, c)]
+        if others:
+            ends = [primary] + others
+            h = source[ends] - source[j]
+            t = rest[ends] - rest[j]
+            hold = 0.5 * np.mean(np.sum(h * h, axis=1))
+            solved = (t.T @ h + hold * linear[j]) @ np.linalg.inv(h.T @ h + hold * np.eye(3))
+            spread = np.linalg.svd(solved, compute_uv=False)
+            if spread.max() <= AXIAL_LIMIT * 1.25 and spread.min() >= 1 / (AXIAL_LIMIT * 1.25) and np.linalg.det(solved) > 0:
+                linear[j] = solved
+    for j in map(int, np.sort(clip_index)):
+        if not fitted[j]:
+            p = paired_parent[j]
+            turns[j] = turns[p] if p >= 0 else np.eye(3)
+            linear[j] = turns[j]
+    # y -> rest[j] + linear[j] @ (y - source[j]) as a 3x4 matrix
+    return np.concatenate([linear, (rest - np.einsum("jab,jb->ja", linear, source))[:, :, None]], axis=2)

@@ -115,9 +115,11 @@ def _original_parents(result: PipelineResult) -> np.ndarray:
     return np.asarray(result.motion.skeleton.parents)
 
 
-def base_skin(motion: Motion, result: PipelineResult, skin: Skin | None = None) -> Skin:
+def base_skin(motion: Motion, result: PipelineResult, skin: Skin | None = None,
+              joint_map: dict[str, str] | None = None) -> Skin:
     """The skin on the clip's own joints in its rest pose: ``skin`` bound to the clip
-    (`mocap_exaggerate.binding.bind_skin`: as it is when it already is), or the default body."""
+    (`mocap_exaggerate.binding.bind_skin`, with ``joint_map`` for the pairs it misses; as it is
+    when it already is), or the default body."""
     skeleton = motion.skeleton
     hierarchy = result.hierarchy
     if skin is None:
@@ -126,7 +128,7 @@ def base_skin(motion: Motion, result: PipelineResult, skin: Skin | None = None) 
         return default_skin(skeleton, hierarchy.rigid if hierarchy is not None else None)
     from .binding import bind_skin
 
-    return bind_skin(skin, skeleton)[0]
+    return bind_skin(skin, skeleton, joint_map)[0]
 
 
 def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: int = 4) -> Skin:
@@ -151,19 +153,20 @@ def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: 
 
 
 def make_glb(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
-             influences: int = 4) -> tuple[bytes, bytes, str]:
+             influences: int = 4, joint_map: dict[str, str] | None = None) -> tuple[bytes, bytes, str]:
     """The skinned GLB of a run, its skin as ``.npz`` bytes, and how the units were decided."""
-    pieces, weights, how = glb_files(motion, result, skin, units, influences)
+    pieces, weights, how = glb_files(motion, result, skin, units, influences, joint_map)
     return b"".join(pieces), weights, how
 
 
 def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
-              influences: int = 4) -> tuple[list[bytes], bytes, str]:
+              influences: int = 4, joint_map: dict[str, str] | None = None) -> tuple[list[bytes], bytes, str]:
     """As `make_glb`, with the GLB as a list of pieces (no copy of a long clip's animation into one blob).
 
     motion : the captured clip the run started from
-    skin : bound to ``motion``'s joints in its rest pose, or None for the
-        default body grown from the skeleton
+    skin : a character (bound to the clip here when it is not yet, `mocap_exaggerate.binding`;
+        ``joint_map`` for the pairs the binding misses), or None for the default body grown
+        from the skeleton
     """
     from .io.gltf import glb_pieces, unit_scale
     from .io.skin import npz_bytes
@@ -171,7 +174,7 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
     if influences not in (4, 8):
         raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
     scale, how = unit_scale(units, motion.skeleton.height())
-    bound = output_skin(motion, result, base_skin(motion, result, skin), influences)
+    bound = output_skin(motion, result, base_skin(motion, result, skin, joint_map), influences)
     from .limbs import standing_up
 
     step = max(motion.num_frames // 64, 1)  # a sample of the clip tells which way is up

@@ -638,8 +638,12 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
         from .binding import bind_skin
         from .io.skin import check_skin, load_skin
 
+        skin_label = "skin" if isinstance(skin, Skin) else str(skin)
         skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
-        skin, _ = bind_skin(skin, motion.skeleton, joint_map)
+        try:
+            skin, _ = bind_skin(skin, motion.skeleton, joint_map)
+        except ConfigError as error:
+            raise ConfigError(f"{skin_label}: {error} (clip {where})") from None
     result = run(motion, config)
     if kind == ".gif":
         data = render_gif(motion, result, start=start, seconds=seconds, max_fps=max_fps, skin=skin)
