@@ -257,9 +257,9 @@ def read_joint_map(path) -> dict[str, str]:
         if not sep or not clip or not skin or "=" in skin:
             raise InputError(f"expected 'clip joint = skin joint', got {line[:60]!r}", source=label, line=number)
         if clip in pairs:
-            raise InputError(f"clip joint {clip!r} is named twice", source=label, line=number)
+            raise InputError(f"clip joint {_shown(clip)} is named twice", source=label, line=number)
         if skin in taken:
-            raise InputError(f"skin joint {skin!r} is named twice (first on line {taken[skin]})", source=label,
+            raise InputError(f"skin joint {_shown(skin)} is named twice (first on line {taken[skin]})", source=label,
                              line=number)
         pairs[clip] = skin
         taken[skin] = number
@@ -268,10 +268,15 @@ def read_joint_map(path) -> dict[str, str]:
     return pairs
 
 
+def _shown(name: str) -> str:
+    """A name as a message quotes it: its repr, cut short when it is very long."""
+    return repr(name) if len(name) <= 60 else repr(name[:57]) + "..."
+
+
 def _close(name: str, names) -> str:
     import difflib
 
-    close = difflib.get_close_matches(name, list(names), n=3, cutoff=0.5)
+    close = difflib.get_close_matches(name, list(names), n=3, cutoff=0.5) if len(name) <= 200 else []
     return f" (close: {', '.join(close)})" if close else ""
 
 
@@ -305,10 +310,10 @@ def pair_joints(clip: Skeleton, skin: Skin, joint_map: dict[str, str] | None = N
     clip_names = set(clip.names)
     for clip_name, skin_name in (joint_map or {}).items():
         if clip_name not in clip_names:
-            raise ConfigError(f"the joint map names {clip_name!r}, which is not a joint of the clip"
+            raise ConfigError(f"the joint map names {_shown(clip_name)}, which is not a joint of the clip"
                               f"{_close(clip_name, clip.names)}")
         if skin_name not in known:
-            raise ConfigError(f"the joint map names {skin_name!r}, which is not a joint of the skin"
+            raise ConfigError(f"the joint map names {_shown(skin_name)}, which is not a joint of the skin"
                               f"{_close(skin_name, known)}")
         pairs[clip_name], how[clip_name] = skin_name, "map"
     taken = set(pairs.values())

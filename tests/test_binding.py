@@ -304,6 +304,24 @@ def test_bad_joint_map_files_are_refused_naming_the_line(tmp_path, text, message
         read_joint_map(path)
 
 
+def test_an_absurdly_long_name_in_a_joint_map_is_quoted_short(sample_clip, tmp_path):
+    """A 100,000-character name is refused in a line of reasonable length, as users run it."""
+    path = tmp_path / "map.txt"
+    path.write_text("lThigh = " + "x" * 100_000 + "\n")
+    done = subprocess.run([*CLI, "exaggerate", str(sample_clip), "-o", str(tmp_path / "o"), "--skin",
+                           str(tmp_path / "body.glb"), "--joint-map", str(path)], capture_output=True, text=True,
+                          cwd=ROOT, timeout=300)
+    assert done.returncode == 2 and len(done.stderr) < 400  # the skin file is missing: said first, briefly
+    motion, _ = read_bvh(sample_clip)
+    body = default_skin(motion.skeleton)
+    rest = motion.skeleton.rest_positions()
+    other = Skin(body.vertices, body.faces, body.joint_names, body.joints, body.weights,
+                 {n: rest[j] for j, n in enumerate(motion.skeleton.names)})
+    with pytest.raises(ConfigError) as caught:
+        bind_skin(other, motion.skeleton, read_joint_map(path))
+    assert "which is not a joint of the skin" in str(caught.value) and len(str(caught.value)) < 200
+
+
 def test_a_joint_map_reads_names_with_spaces_and_comments(tmp_path):
     path = tmp_path / "map.txt"
     path.write_bytes("\ufeff# 3ds Max biped to MakeHuman\nBip01 L Thigh = upperleg01.L   # the thigh\r\n\nBip01 Pelvis=root\n"

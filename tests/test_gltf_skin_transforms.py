@@ -288,6 +288,8 @@ def test_our_own_glb_reads_back_at_the_clips_rest_pose_upright_in_metres(tmp_pat
     (lambda nodes: setattr(nodes[0], "scale", [1.0, None, 1.0]), "readable"),  # pygltflib refuses it
     (lambda nodes: setattr(nodes[0], "matrix", [1.0] * 15), "matrix"),
     (lambda nodes: setattr(nodes[0], "translation", ["up", 0, 0]), "readable"),
+    # Scales that overflow once composed down the tree: one message, no RuntimeWarning on the way.
+    (lambda nodes: setattr(nodes[0], "scale", [1e200, 1e200, 1e200]), "node transforms must be finite"),
 ])
 def test_a_broken_node_tree_is_an_input_error(tmp_path, edit, words):
     """Loops, bad children and transforms that are not numbers end in an InputError naming the fault."""

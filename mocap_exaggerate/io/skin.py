@@ -304,8 +304,12 @@ def _world_matrices(nodes: list, label: str) -> tuple[np.ndarray, np.ndarray]:
             node = parent[node]
         above = world[node] if node >= 0 else np.eye(4)
         for number in reversed(chain):
-            above = world[number] = above @ local[number]
+            with np.errstate(over="ignore", invalid="ignore"):  # huge scales are refused just below
+                above = world[number] = above @ local[number]
             done[number] = True
+    if not np.all(np.abs(world) <= 1e9):
+        raise InputError("node transforms must be finite numbers (at most 1e9 in size, composed down the tree)",
+                         source=label)
     return world, parent
 
 
