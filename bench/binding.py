@@ -19,7 +19,7 @@ from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.skin import load_skin
 from mocap_exaggerate.outputs import output_skin
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.preview import pose_skin
+from mocap_exaggerate.quality import face_stretch
 from common import FPS  # same folder: run as python bench/binding.py
 from throughput import best_of
 
@@ -28,14 +28,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def stretched(skin, bind, rotations, positions, index, frames) -> float:
     """Share of faces whose longest edge passes 2x its bound length at some of ``frames``."""
-    edges = np.concatenate([skin.faces[:, [0, 1]], skin.faces[:, [1, 2]], skin.faces[:, [2, 0]]])
-    rest = np.linalg.norm(np.diff(skin.vertices[edges], axis=1)[:, 0], axis=1)
-    worst = np.zeros(len(skin.faces))
-    for frame in frames:
-        posed = pose_skin(skin, bind, rotations[frame], positions[frame], index)
-        ratio = np.linalg.norm(np.diff(posed[edges], axis=1)[:, 0], axis=1) / rest
-        worst = np.maximum(worst, ratio.reshape(3, -1).max(axis=0))
-    return float(np.mean(worst > 2.0))
+    return float(np.mean(face_stretch(skin, bind, rotations, positions, index, frames) > 2.0))
 
 
 def main() -> None:

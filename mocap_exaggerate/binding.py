@@ -363,11 +363,12 @@ def needs_binding(skin: Skin, clip: Skeleton, joint_map: dict | None = None) -> 
         return True
     if not skin.bind:
         return False
-    if any(n not in clip._index for n in skin.joint_names):
+    names = set(clip.names)
+    if any(n not in names for n in skin.joint_names):
         return True
     rest = clip.rest_positions()
     off = [np.linalg.norm(np.asarray(p, dtype=np.float64) - rest[clip.index(n)]) for n, p in skin.bind.items()
-           if n in clip._index]
+           if n in names]
     return not off or max(off) > 1e-3 * clip.height()
 
 

@@ -21,6 +21,8 @@ kept rest frames included, so a pop where the rest pose ends shows):
 
 ``bench/quality.py`` prints them for every shared clip and preset; the tests hold the
 presets to them.
+
+`face_stretch` measures a skinned mesh instead: how far its faces stretch when posed.
 """
 
 from __future__ import annotations
@@ -132,3 +134,23 @@ def motion_quality(motion: Motion, result) -> dict:
         "torso_within_limbs": (max(torso_peaks) <= min(limb_peaks) + 0.01) if torso_peaks and limb_peaks else None,
         "drift": drift(out_all[:, root]), "drift_captured": drift(cap[:, 0]),
     }
+
+
+def face_stretch(skin, bind: np.ndarray, rotations: np.ndarray, positions: np.ndarray, joint_index: np.ndarray,
+                 frames) -> np.ndarray:
+    """Per face of ``skin``, its longest edge's largest stretch (posed length over bound length)
+    at ``frames`` (a few: one posed mesh at a time), posed by `mocap_exaggerate.preview.pose_skin`.
+
+    bind : (J, 3) the skeleton's bind positions; rotations, positions : (F, J, ...) world transforms
+    joint_index : skeleton index of each of the skin's joints
+    """
+    from .preview import pose_skin
+
+    edges = np.concatenate([skin.faces[:, [0, 1]], skin.faces[:, [1, 2]], skin.faces[:, [2, 0]]])
+    rest = np.linalg.norm(np.diff(skin.vertices[edges], axis=1)[:, 0], axis=1)
+    worst = np.zeros(len(skin.faces))
+    for frame in frames:
+        posed = pose_skin(skin, bind, rotations[frame], positions[frame], joint_index)
+        ratio = np.linalg.norm(np.diff(posed[edges], axis=1)[:, 0], axis=1) / rest
+        worst = np.maximum(worst, ratio.reshape(3, -1).max(axis=0))
+    return worst

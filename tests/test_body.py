@@ -15,7 +15,7 @@ from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.limbs import find_limbs
 from mocap_exaggerate.outputs import output_skin
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.preview import pose_skin
+from mocap_exaggerate.quality import face_stretch as edge_stretch
 from mocap_exaggerate.skeleton import Skeleton
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 
@@ -38,18 +38,6 @@ def pieces(skin) -> list[np.ndarray]:
     mesh = trimesh.Trimesh(skin.vertices, skin.faces, process=False)
     parts = trimesh.graph.connected_components(mesh.edges_unique, nodes=np.arange(len(skin.vertices)))
     return [np.sort(np.asarray(part)) for part in parts]
-
-
-def edge_stretch(skin, bind, rotations, positions, joint_index, frames) -> np.ndarray:
-    """Per face, its longest edge's largest stretch (posed length over rest length) over ``frames``."""
-    edges = np.concatenate([skin.faces[:, [0, 1]], skin.faces[:, [1, 2]], skin.faces[:, [2, 0]]])
-    rest = np.linalg.norm(np.diff(skin.vertices[edges], axis=1)[:, 0], axis=1)
-    worst = np.zeros(len(skin.faces))
-    for frame in frames:
-        posed = pose_skin(skin, bind, rotations[frame], positions[frame], joint_index)
-        ratio = np.linalg.norm(np.diff(posed[edges], axis=1)[:, 0], axis=1) / rest
-        worst = np.maximum(worst, ratio.reshape(3, -1).max(axis=0))
-    return worst
 
 
 @pytest.mark.parametrize("path", SAMPLE_CLIPS, ids=lambda p: p.stem)
