@@ -31,8 +31,8 @@ from .stages.extrapolate import extrapolate, parse_duration, smootherstep
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping, strike_scale
-from .stages.subjoints import (SubjointConfig, SubjointHierarchy, build_hierarchy, minor_branches, position_subjoints,
-                               riders, rubber_groups)
+from .stages.subjoints import (SubjointConfig, SubjointHierarchy, build_hierarchy, link_starts, minor_branches,
+                               position_subjoints, riders, rubber_groups)
 from .tpose import detect_rest_frames
 
 __all__ = [
@@ -350,16 +350,17 @@ def _orient(state: State, plan: tuple) -> State:
     hierarchy, positions = state.rubber()
     sub_rot, sub_pos = recover_orientations(positions, hierarchy, motion, state.captured_rot, state.captured_pos,
                                             state.pins, max_speed=max_speed)
+    rubber = link_starts(hierarchy)  # the skeleton sub_rot and sub_pos are on
     if config.skeleton == "original":
-        keep = hierarchy.original
+        keep = rubber.original
         out_pos, out_rot = sub_pos[:, keep], sub_rot[:, keep]
         out = motion_from_world(out_pos, out_rot, motion.skeleton.with_full_channels(), motion.frame_time,
                                 motion.euler_hint)
         original_index = np.arange(motion.skeleton.num_joints)
     else:
         out_pos, out_rot = sub_pos, sub_rot
-        out = motion_from_world(out_pos, out_rot, hierarchy.skeleton, motion.frame_time)
-        original_index = hierarchy.original
+        out = motion_from_world(out_pos, out_rot, rubber.skeleton, motion.frame_time)
+        original_index = rubber.original
     return replace(state, output=Output(out, out_pos, out_rot, original_index))
 
 
@@ -399,7 +400,8 @@ class PipelineResult:
     world_positions : (F, J_out, 3) float64 positions the output's FK reproduces
     world_rotations : (F, J_out, 4) float64 orientations it reproduces
     original_index : (J,) int, where each original joint is in the output skeleton
-    hierarchy : the sub-joint hierarchy (None when sub-joints were off)
+    hierarchy : the rubber skeleton written out, with each cut link's start joint
+        (`mocap_exaggerate.stages.subjoints.link_starts`); None when sub-joints were off
     rest_frames : leading synthetic rest frames kept out of the filters
     stages : names of the stages that ran, in order
     timings : seconds per step, in run order
@@ -478,7 +480,7 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
         world_positions=state.output.world_positions,
         world_rotations=state.output.world_rotations,
         original_index=state.output.original_index,
-        hierarchy=state.hierarchy,
+        hierarchy=link_starts(state.hierarchy) if state.hierarchy is not None else None,
         rest_frames=state.rest_frames,
         rest_frames_dropped=state.rest_frames_dropped,
         timings=timings,

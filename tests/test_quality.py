@@ -77,6 +77,8 @@ def test_rubber_limbs_do_not_kink_next_to_the_shoulder_or_hip(path):
         base = hierarchy.original[limb.base]
         first = next(j for j in range(skeleton.num_joints)
                      if skeleton.parents[j] == base and hierarchy.link_child[j] == limb.joints[1])
+        if not skeleton.offsets[first].any():  # the link's zero-length start joint sits on the root
+            first = next(j for j in range(skeleton.num_joints) if skeleton.parents[j] == first)
         second = next(j for j in range(skeleton.num_joints) if skeleton.parents[j] == first)
         a, b = points[:, first] - points[:, base], points[:, second] - points[:, first]
         bend = np.degrees(np.arccos(np.clip(np.sum(a * b, -1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1)), -1, 1)))

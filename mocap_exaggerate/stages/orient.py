@@ -1,11 +1,16 @@
 """Orientation recovery (Kwon & Lee 2008, section 6): from positions back to joint channels.
 
-Sub-joints that sit on original joints take the original joint's captured
-world orientation turned by the smallest rotation that carries its original
-link direction onto the new one; sub-joints between two original joints
-slerp between their orientations. Because link lengths change, every output
-joint carries position and rotation channels (6 DOF), and forward kinematics
-of the result reproduces the positions exactly.
+Original joints take their captured world orientation turned by the
+smallest rotation that carries their original link direction onto the new
+one. The sub-joints of a cut link follow the curve: a zero-length start
+joint on the original joint (`link_starts`) and each sub-joint after it
+carry their rest sub-link onto the current one, with the twist between the
+link's two ends spread along it (`curve_frames`). Kwon and Lee slerp between
+the original joints' orientations instead, which points a sub-joint's bone
+up to 47-85 degrees (170 on iClone thighs) away from where its sub-link goes
+even with no exaggeration: positions were right, a mesh was not. Because link
+lengths change, every output joint carries position and rotation channels (6
+DOF), and forward kinematics of the result reproduces the positions exactly.
 
 Which "link" turns a joint: its one outgoing link; at a branch joint (hips,
 chest) the rotation that best carries all of its outgoing links (a Kabsch
@@ -19,15 +24,16 @@ recovered parent.
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
-from ..kinematics import frame_blocks, local_from_world
+from ..kinematics import local_from_world
 from ..motion import Motion
 from ..rotations import (quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow,
-                         quat_rotate, quat_slerp, quat_unroll)
-from .extrapolate import step_gain
-from .subjoints import SubjointHierarchy, riders
+                         quat_rotate, quat_slerp)
+from .extrapolate import smootherstep, step_gain
+from .subjoints import SubjointHierarchy, link_starts, riders
 
-__all__ = ["recover_orientations", "motion_from_world", "incoming_joint"]
+__all__ = ["recover_orientations", "curve_frames", "motion_from_world", "incoming_joint"]
 
 
 def motion_from_world(world_pos, world_rot, skeleton, frame_time, euler_hint=None) -> Motion:
@@ -181,13 +187,16 @@ def recover_orientations(
         new_pos[:, j] = new_pos[:, p] + quat_rotate(world[:, p], source.local_positions[:, j])
     sub_pos[:, original] = new_pos
 
-    out = np.empty(sub_pos.shape[:2] + (4,))
-    out[:, original] = world
-    between = np.flatnonzero(~hierarchy.is_original)
-    if len(between):
-        out[:, between] = _between(world, hierarchy.link_parent[between], hierarchy.link_child[between],
-                                   hierarchy.fraction[between])
-    return out, sub_pos
+    # The rubber skeleton written out: a start joint on each cut link (see `link_starts`).
+    rubber = link_starts(hierarchy)
+    if rubber is hierarchy:
+        positions = sub_pos
+    else:
+        positions = np.empty((frames, rubber.skeleton.num_joints, 3))
+        starts = rubber.fraction == 0.0
+        positions[:, ~starts] = sub_pos
+        positions[:, starts] = positions[:, rubber.original[rubber.link_parent[starts]]]
+    return curve_frames(world, positions, rubber), positions
 
 
 #: Passes of the riders' speed limit (each leaves less over budget, as in extrapolation's).
@@ -224,26 +233,75 @@ def _calm_riders(world, new_pos, source_rot, source_pos, skeleton, rigid, max_sp
             world[:, p] = quat_normalize(quat_mul(quat_pow(turn, gain), source_rot[:, p]))
 
 
-def _between(world: np.ndarray, first: np.ndarray, second: np.ndarray, fraction: np.ndarray) -> np.ndarray:
-    """Orientations ``(F, n, 4)`` of sub-joints a ``fraction`` of the way from joint ``first`` to ``second``.
+#: Cosines of the fold at a link's end joint between which its twist fades out (165 and 120 degrees).
+_FOLDED, _UNFOLDED = np.cos(np.radians(165.0)), np.cos(np.radians(120.0))
 
-    The turn from one end to the other, ``r = q_first^-1 q_second``, is made
-    hemisphere-continuous in time and, per link, taken the way most frames
-    take it (``w >= 0`` on average); the sub-joint is ``q_first r^fraction``.
-    A plain slerp takes the shorter way frame by frame, so when a forearm's
-    twist and its bend add up past half a turn every sub-joint on the link
-    spins round in one frame.
+#: Twists (radians) past which a link's twist fades out, gone at half a turn.
+_TWIST_FADE = np.radians(120.0)
+
+
+def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHierarchy) -> np.ndarray:
+    """World orientations ``(F, J', 4)`` of a rubber skeleton whose bones follow their sub-links.
+
+    world : (F, J, 4) orientations of the original joints, kept as they are
+    positions : (F, J', 3) positions on ``hierarchy``, a `link_starts` hierarchy
+        (each cut link's joints are consecutive: its start ``s0``, ``s1`` ... and the joint it ends at)
+
+    Along each cut link, a frame is carried from one sub-link to the next by
+    the smallest turn (a discrete rotation-minimising frame, as spline-IK and
+    ribbon rigs do), starting from the original joint's orientation turned
+    onto the first sub-link, so every sub-joint's rest sub-link points along
+    its current one. The twist that frame is missing at the far end, about the
+    last sub-link, against the frame the link blends into there (the next
+    link's start where the chain goes on through one link, else the end
+    joint's own), is spread along the link in proportion to each sub-joint's
+    place. Where that twist is ill-defined (the end's frame folds the last
+    sub-link back past 120 degrees) or near half a turn, it fades out
+    smoothly, and it is eased over a frame either way, so every frame follows
+    from its neighbours.
     """
-    links, which = np.unique(np.stack([first, second], axis=1), axis=0, return_inverse=True)
-    turn = quat_unroll(quat_mul(quat_inv(world[:, links[:, 0]]), world[:, links[:, 1]]), axis=0)
-    # A jump of more than a quarter turn in one frame (a T-pose ending) has no continuity to keep:
-    # each stretch between such jumps takes the way most of its frames take.
-    dots = np.abs(np.sum(turn[1:] * turn[:-1], axis=-1))  # (F-1, L)
-    segment = np.concatenate([np.zeros((1, turn.shape[1]), np.int64), np.cumsum(dots < 0.7, axis=0)])
-    segment += np.arange(turn.shape[1]) * len(turn)  # unique per link
-    votes = np.bincount(segment.ravel(), turn[..., 3].ravel(), minlength=turn.shape[1] * len(turn))
-    turn *= np.where(votes[segment] < 0.0, -1.0, 1.0)[..., None]
-    out = np.empty(world.shape[:1] + (len(first), 4))
-    for part in frame_blocks(len(world)):
-        out[part] = quat_mul(world[part][:, first], quat_pow(turn[part][:, which.ravel()], fraction))
+    sub = hierarchy.skeleton
+    out = np.empty(positions.shape[:2] + (4,))
+    out[:, hierarchy.original] = world
+    starts = np.flatnonzero(hierarchy.fraction == 0.0)
+    if not len(starts):
+        return out
+    counts = np.bincount(hierarchy.link_child[~hierarchy.is_original], minlength=len(hierarchy.original))
+    cuts = counts[hierarchy.link_child[starts]]  # sub-links on each link: s0 ... s(n-1), then its end joint
+    direction = sub.offsets[starts + 1]  # every sub-link of a link rests along the same direction
+    direction = direction / np.maximum(np.linalg.norm(direction, axis=-1, keepdims=True), 1e-300)
+    head = hierarchy.original[hierarchy.link_parent[starts]]
+    end = hierarchy.original[hierarchy.link_child[starts]]
+    frame = out[:, head]
+    for k in range(int(cuts.max())):
+        on = np.flatnonzero(cuts > k)
+        joint = starts[on] + k
+        along = positions[:, joint + 1] - positions[:, joint]
+        frame[:, on] = quat_normalize(quat_mul(quat_between(quat_rotate(frame[:, on], direction[on]), along),
+                                               frame[:, on]))
+        out[:, joint] = frame[:, on]
+    # The twist left at the far end, against the end's frame: the next link's start where the chain
+    # goes on through one link (what the skin blends this link into), else the end joint's own. Their
+    # turn relative to the carried frame, split into a swing and a twist about the last sub-link.
+    following = np.bincount(hierarchy.link_parent[starts], minlength=len(hierarchy.original))
+    after = {int(hierarchy.link_parent[j]): int(j) for j in starts if following[hierarchy.link_parent[j]] == 1}
+    ends = np.array([after.get(int(c), int(e)) for c, e in zip(hierarchy.link_child[starts], end)], dtype=np.int64)
+    last = positions[:, end] - positions[:, starts + cuts - 1]
+    axis = last / np.maximum(np.linalg.norm(last, axis=-1, keepdims=True), 1e-300)
+    gap = quat_mul(out[:, ends], quat_inv(frame))
+    sign = np.where(gap[..., 3] < 0.0, -1.0, 1.0)  # q and -q are one turn: take the one within half a turn
+    angle = 2.0 * np.arctan2(sign * np.sum(gap[..., :3] * axis, axis=-1), np.abs(gap[..., 3]))
+    pointing = quat_rotate(gap, axis)
+    fold = np.sum(pointing * axis, axis=-1) / np.maximum(np.linalg.norm(pointing, axis=-1), 1e-300)
+    angle *= (smootherstep((fold - _FOLDED) / (_UNFOLDED - _FOLDED))
+              * smootherstep((np.pi - np.abs(angle)) / (np.pi - _TWIST_FADE)))
+    angle = gaussian_filter1d(angle, 1.0, axis=0, mode="nearest")  # where the fades pass quickly, over a few frames
+    for k in range(1, int(cuts.max())):
+        on = np.flatnonzero(cuts > k)
+        joint = starts[on] + k
+        along = positions[:, joint + 1] - positions[:, joint]
+        along /= np.maximum(np.linalg.norm(along, axis=-1, keepdims=True), 1e-300)
+        half = 0.5 * angle[:, on] * (k / cuts[on])
+        twist = np.concatenate([along * np.sin(half)[..., None], np.cos(half)[..., None]], axis=-1)
+        out[:, joint] = quat_normalize(quat_mul(twist, out[:, joint]))
     return out

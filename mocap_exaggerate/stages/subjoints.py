@@ -16,6 +16,7 @@ rest link length, and each sub-joint sits on it at its own parameter.
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass, field
 
@@ -29,6 +30,7 @@ __all__ = [
     "SubjointConfig",
     "SubjointHierarchy",
     "build_hierarchy",
+    "link_starts",
     "minor_branches",
     "rubber_groups",
     "position_subjoints",
@@ -302,6 +304,67 @@ def build_hierarchy(skeleton: Skeleton, config: SubjointConfig | None = None) ->
     return SubjointHierarchy(
         sub, original, np.array(link_child), np.array(link_parent), np.array(fraction), rigid, groups
     )
+
+
+@functools.lru_cache(maxsize=16)
+def link_starts(hierarchy: SubjointHierarchy) -> SubjointHierarchy:
+    """``hierarchy`` with a zero-length joint ``<Joint>_s0`` at the start of every cut link.
+
+    The rubber skeleton that is written out. The first sub-link of a link
+    leaves its original joint along the curve, not along the straight link,
+    so no single rotation of the original joint can both keep the captured
+    orientation (what every tool that reads the joint by name expects) and
+    point the first sub-link's bone where it goes (what a skin follows). The
+    start joint sits on the original joint (its OFFSET is zero, its fraction
+    0) and carries the curve's frame; the original joint keeps its own. A
+    hierarchy with no cut link is returned as it is.
+    """
+    parents = hierarchy.skeleton.parents
+    first = np.flatnonzero((hierarchy.fraction > 0) & ~hierarchy.is_original & (parents >= 0))
+    first = first[hierarchy.is_original[parents[first]]]  # the first sub-joint of each cut link
+    if not len(first):
+        return hierarchy
+    sub = hierarchy.skeleton
+    starts = set(int(j) for j in first)
+    new_index = np.empty(sub.num_joints, dtype=np.int64)
+    names: list[str] = []
+    parents: list[int] = []
+    offsets: list[np.ndarray] = []
+    channels: list[tuple[str, ...]] = []
+    end_sites: list[np.ndarray] = []
+    link_child: list[int] = []
+    link_parent: list[int] = []
+    fraction: list[float] = []
+    taken = set(sub.names)
+    for j in range(sub.num_joints):
+        parent = int(new_index[sub.parents[j]]) if j > 0 else -1
+        if j in starts:
+            name = f"{hierarchy.skeleton.names[hierarchy.original[hierarchy.link_child[j]]]}_s0"
+            while name in taken:
+                name += "_"
+            taken.add(name)
+            names.append(name)
+            parents.append(parent)
+            offsets.append(np.zeros(3))
+            channels.append(sub.channels[j])
+            end_sites.append(np.full(3, np.nan))
+            link_child.append(int(hierarchy.link_child[j]))
+            link_parent.append(int(hierarchy.link_parent[j]))
+            fraction.append(0.0)
+            parent = len(names) - 1
+        new_index[j] = len(names)
+        names.append(sub.names[j])
+        parents.append(parent)
+        offsets.append(sub.offsets[j])
+        channels.append(sub.channels[j])
+        end_sites.append(sub.end_sites[j])
+        link_child.append(int(hierarchy.link_child[j]))
+        link_parent.append(int(hierarchy.link_parent[j]))
+        fraction.append(float(hierarchy.fraction[j]))
+    skeleton = Skeleton(tuple(names), np.array(parents), np.array(offsets), tuple(channels), np.array(end_sites),
+                        sub.positions, sub.up)
+    return SubjointHierarchy(skeleton, new_index[hierarchy.original], np.array(link_child), np.array(link_parent),
+                             np.array(fraction), hierarchy.rigid, hierarchy.groups)
 
 
 def bezier_points(points: np.ndarray, knots: np.ndarray, params: np.ndarray) -> np.ndarray:

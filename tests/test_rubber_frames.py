@@ -1,0 +1,159 @@
+"""Issue 23, points 1 and 2: the rubber sub-joints' frames follow their sub-links, and the skin's
+weights follow the rubber (by where a vertex lies along its chain, never onto an unrelated link)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocap_exaggerate.config import resolve_config
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
+from mocap_exaggerate.pipeline import run
+from mocap_exaggerate.skeleton import Skeleton
+from mocap_exaggerate.skinning import Skin, reweight, subjoint_bind_positions
+from mocap_exaggerate.stages.subjoints import SubjointConfig, build_hierarchy, link_starts
+
+from .helpers import all_clip_params
+
+IDENTITY = {"extrapolate": {"omega": 1.0}, "correct": {"enabled": False}, "springs": {"enabled": False},
+            "contacts": {"enabled": False}}
+
+
+def bone_misalignment(motion, hierarchy) -> np.ndarray:
+    """Degrees between each single child's translation and its OFFSET, over the frames, for every
+    joint of the rubber chains with one child at a distance ((F, n) array)."""
+    skeleton = motion.skeleton
+    children = np.bincount(skeleton.parents[1:], minlength=skeleton.num_joints)
+    height = skeleton.height()
+    picked = [c for c in range(1, skeleton.num_joints)
+              if children[skeleton.parents[c]] == 1 and np.linalg.norm(skeleton.offsets[c]) > 1e-4 * height
+              and not hierarchy.rigid[hierarchy.link_child[c]]]
+    moved = motion.local_positions[:, picked]
+    rest = skeleton.offsets[picked]
+    cosine = np.sum(moved * rest, -1) / (np.linalg.norm(moved, axis=-1) * np.linalg.norm(rest, axis=-1))
+    return np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+
+
+@pytest.mark.parametrize("setting", ["identity", "looney"])
+@pytest.mark.parametrize("path", all_clip_params())
+def test_every_rubber_bone_points_along_its_sub_link_in_the_written_file(path, setting):
+    # Before: 47-85 degrees at worst with no exaggeration (170-178 on iClone thighs), because the
+    # sub-joints slerped between the original joints' orientations.
+    motion, _ = read_bvh(path)
+    overrides = IDENTITY if setting == "identity" else None
+    result = run(motion, resolve_config("looney" if setting == "looney" else "cartoon", None, overrides))
+    written, _ = read_bvh(format_bvh(result.motion))
+    angles = bone_misalignment(written, result.hierarchy)
+    assert angles.size and angles.max() <= 1.0, (path.name, setting, angles.max())
+    if setting == "identity":  # and the original joints are the captured ones, orientations too
+        captured_rot, captured_pos = motion.forward_kinematics()
+        from mocap_exaggerate.rotations import quat_angle
+
+        assert np.max(quat_angle(result.world_rotations[:, result.original_index], captured_rot)) <= 1e-6
+
+
+def test_each_cut_link_starts_with_a_zero_length_joint_on_its_original_joint():
+    skeleton = _body()
+    plain = build_hierarchy(skeleton, SubjointConfig(per_link=3))
+    rubber = link_starts(plain)
+    names = rubber.skeleton.names
+    assert names[:6] == ("Hips", "LeftUpLeg_s0", "LeftUpLeg_s1", "LeftUpLeg_s2", "LeftUpLeg", "LeftLeg_s0")
+    starts = np.flatnonzero(rubber.fraction == 0.0)
+    assert len(starts) == 8  # one per cut link
+    assert not rubber.skeleton.offsets[starts].any()
+    assert np.allclose(rubber.skeleton.rest_positions()[rubber.original], skeleton.rest_positions())
+    assert [names[j] for j in rubber.original] == list(skeleton.names)
+    uncut = build_hierarchy(skeleton, SubjointConfig(per_link=1))
+    assert link_starts(uncut) is uncut
+
+
+def test_twist_between_the_ends_is_spread_along_the_link():
+    # A straight arm whose hand turns 90 degrees about the forearm: the forearm's sub-joints take
+    # 0, 1/4, 1/2, 3/4 of it, each bone still along the forearm.
+    from mocap_exaggerate.rotations import quat_angle, quat_from_axis_angle, quat_rotate
+    from mocap_exaggerate.stages.orient import curve_frames
+
+    skeleton = Skeleton(("Shoulder", "Elbow", "Hand"), np.array([-1, 0, 1]),
+                        np.array([[0.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0]]),
+                        tuple(("Zrotation", "Xrotation", "Yrotation") for _ in range(3)),
+                        np.array([[np.nan] * 3, [np.nan] * 3, [0.2, 0, 0]]))
+    rubber = link_starts(build_hierarchy(skeleton, SubjointConfig(per_link=4)))
+    positions = subjoint_bind_positions(skeleton, rubber)[None].repeat(3, axis=0)
+    world = np.zeros((3, 3, 4))
+    world[..., 3] = 1.0
+    world[:, 2] = quat_from_axis_angle("X", np.radians([90.0, 90.0, 90.0]))
+    frames = curve_frames(world, positions, rubber)
+    forearm = [rubber.skeleton.index(f"Hand_s{k}") for k in range(4)]
+    turned = np.degrees(quat_angle(frames[1, forearm], world[1, 0]))
+    assert np.allclose(turned, [0.0, 22.5, 45.0, 67.5], atol=1.5)  # eased over a frame: all three equal
+    assert np.allclose(quat_rotate(frames[1, forearm], [1.0, 0, 0]), [1.0, 0, 0], atol=1e-9)
+    assert np.allclose(frames[:, rubber.original], world)
+
+
+def _body() -> Skeleton:
+    """Hips with two legs and a spine, every link 1 long, legs along -Y, spine along +Y."""
+    names = ("Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "RightUpLeg", "RightLeg", "RightFoot", "Spine", "Head")
+    parents = np.array([-1, 0, 1, 2, 0, 4, 5, 0, 7])
+    offsets = np.array([[0, 1, 0], [0.3, 0, 0], [0, -1, 0], [0, -1, 0], [-0.3, 0, 0], [0, -1, 0], [0, -1, 0],
+                        [0, 1, 0], [0, 1, 0]], dtype=float)
+    ends = np.full((9, 3), np.nan)
+    ends[[3, 6]] = [0, 0, 0.2]
+    ends[8] = [0, 0.3, 0]
+    channels = tuple(("Zrotation", "Xrotation", "Yrotation") for _ in range(9))
+    return Skeleton(names, parents, offsets, channels, ends)
+
+
+def _weights_by_name(skin: Skin, vertex: int) -> dict[str, float]:
+    return {skin.joint_names[j]: w for j, w in zip(skin.joints[vertex], skin.weights[vertex]) if w > 0}
+
+
+def test_a_branch_joints_weight_stays_on_the_link_a_vertex_lies_by():
+    skeleton = _body()
+    rubber = link_starts(build_hierarchy(skeleton, SubjointConfig(per_link=4)))
+    # Three vertices bound to the hips: by the left hip link, by the right one, up the spine.
+    vertices = np.array([[0.25, 0.95, 0.1], [-0.25, 0.95, 0.1], [0.0, 1.5, 0.1]])
+    skin = Skin(vertices, np.array([[0, 1, 2]]), ("Hips",), np.zeros((3, 1), np.int64), np.ones((3, 1)))
+    out = reweight(skin, skeleton, rubber)
+    left, right, spine = (_weights_by_name(out, v) for v in range(3))
+    assert left and all(n.startswith("LeftUpLeg_s") for n in left), left
+    assert right and all(n.startswith("RightUpLeg_s") for n in right), right
+    assert spine and all(n.startswith("Spine_s") for n in spine), spine
+    for weights in (left, right, spine):
+        assert abs(sum(weights.values()) - 1.0) < 1e-12
+
+
+def test_a_knee_blends_the_thigh_into_the_shin():
+    skeleton = _body()
+    rubber = link_starts(build_hierarchy(skeleton, SubjointConfig(per_link=4)))
+    # Bound wholly to the thigh (LeftUpLeg), at the knee: half on the thigh's last sub-link, half on
+    # the shin's first; at the thigh's middle: all on the sub-links there.
+    hip_y, knee_y = skeleton.rest_positions()[1:3, 1]
+    # At the knee; at the peak of the thigh's second sub-link; at the shin's first, still bound to the thigh.
+    vertices = np.array([[0.35, knee_y, 0.05], [0.35, hip_y - 0.375, 0.05], [0.35, knee_y - 0.125, 0.05]])
+    skin = Skin(vertices, np.array([[0, 1, 2]]), ("LeftUpLeg",), np.zeros((3, 1), np.int64), np.ones((3, 1)))
+    out = reweight(skin, skeleton, rubber)
+    knee, middle, below = (_weights_by_name(out, v) for v in range(3))
+    assert knee == pytest.approx({"LeftLeg_s3": 0.5, "LeftFoot_s0": 0.5})  # thigh's last, shin's first
+    assert middle == pytest.approx({"LeftLeg_s1": 1.0})
+    assert below == pytest.approx({"LeftFoot_s0": 1.0})
+
+
+def test_a_stretched_straight_chain_stretches_its_skin_evenly():
+    # Linear blend skinning of a uniformly stretched straight chain: with each owner peaking at its
+    # sub-link's middle, the distance between any two vertices along the chain stretches by exactly
+    # the chain's factor (with the old inverse-distance shares it did not).
+    skeleton = _body()
+    rubber = link_starts(build_hierarchy(skeleton, SubjointConfig(per_link=4)))
+    bind = subjoint_bind_positions(skeleton, rubber)
+    hip = bind[rubber.original[1]]
+    ys = np.linspace(hip[1] - 0.2, hip[1] - 1.8, 9)
+    vertices = np.stack([np.full(9, hip[0] + 0.05), ys, np.zeros(9)], axis=1)
+    owners = np.where(ys > hip[1] - 1.0, 1, 2)  # the thigh's joint above the knee, the shin's below
+    skin = Skin(vertices, np.array([[0, 1, 2]]), ("LeftUpLeg", "LeftLeg"), owners[:, None] - 1, np.ones((9, 1)))
+    out = reweight(skin, skeleton, rubber)
+    factor = 1.7
+    posed = bind.copy()
+    posed[:, 1] = hip[1] + factor * (bind[:, 1] - hip[1])  # every joint of the leg slides down the line
+    moved = np.einsum("vk,vkc->vc", out.weights, vertices[:, None] + (posed - bind)[out.joints])
+    steps = np.diff(moved[:, 1])
+    assert np.allclose(steps, factor * np.diff(ys), rtol=1e-9)
