@@ -3,19 +3,20 @@
 A skin is stored sparsely, as glTF does: for each vertex the indices of its
 strongest joints and their weights, ``(V, K)`` each, rows summing to 1.
 
-Redistribution (Kwon & Lee 2008, section 6):
+Redistribution (after Kwon & Lee 2008, section 6; see `reweight` for where
+and why it departs from their inverse-distance rule):
 
-A vertex bound to original joint k with weight w is re-bound to k's
-sub-joints with weights proportional to the inverse distance from the vertex
-to each sub-link segment in the rest pose, summing to w; then the strongest
-influences are kept and renormalised. k's sub-joints are k itself and the
-sub-joints on the links from k to its children, each owning the sub-link
-that starts at it (a bone moves with its head joint).
+A vertex bound to original joint k with weight w is re-bound to the joints
+owning the sub-links of k's outgoing link (each owns the sub-link that starts
+at it: a bone moves with its head joint), by where the vertex lies along the
+link, blending across the joints into the links before and after; then the
+strongest influences are kept and renormalised.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -120,10 +121,29 @@ def segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nda
 
 
 def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, max_influences: int = 4) -> Skin:
-    """The skin re-bound to the sub-joint skeleton of ``hierarchy``.
+    """The skin re-bound to the rubber skeleton of ``hierarchy``.
 
     skin : bound to (a subset of) ``skeleton``'s joints by name, in its rest pose
-    Returns a Skin whose joint names are the sub-joint skeleton's.
+    hierarchy : the rubber skeleton (`mocap_exaggerate.stages.subjoints.link_starts`, as
+        `mocap_exaggerate.pipeline.run` returns it, or a plain `build_hierarchy`)
+    Returns a Skin whose joint names are the rubber skeleton's.
+
+    A vertex's weight on an original joint is shared among the joints that own
+    the sub-links of that joint's outgoing link, by where the vertex lies along
+    it: each sub-link's owner peaks at the sub-link's middle and hands over
+    linearly to its neighbours, and past the link's ends to the last sub-link
+    of the link before and the first of the link after (a knee blends the
+    thigh into the shin; on a stretched chain the skin stretches evenly, as
+    the joints do). A branch joint (hips, chest) shares its weight among its
+    outgoing links by nearness, so a left buttock takes nothing from the right
+    thigh or the spine. An end joint (a hand, a head) keeps its weight, handing
+    over to the link before it where a vertex lies short of the joint; riders
+    (fingers, toes) keep theirs.
+
+    Kwon and Lee share the weight by the inverse distance to every sub-link of
+    the joint; that spreads a branch joint over the sub-links of all its child
+    links and puts a vertex's weight on sub-links far down the bone, which tore
+    a real character at the hips and shoulders (see the README's design notes).
     """
     sub = hierarchy.skeleton
     rest = subjoint_bind_positions(skeleton, hierarchy, skin.bind)
@@ -132,67 +152,151 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
     if unknown:
         raise ConfigError(f"skin joints not in the skeleton: {', '.join(unknown[:5])}")
     to_original = np.array([index[n] for n in skin.joint_names], dtype=np.int64)
+    links = _link_knots(skeleton, hierarchy, rest)
 
-    # Segments owned by each original joint, as a CSR list: seg_start[k]:seg_start[k + 1].
-    owner = np.array([_owner(hierarchy, int(p)) for p in sub.parents[1:]], dtype=np.int64)
-    order = np.argsort(owner, kind="stable")
-    seg_head = (sub.parents[1:])[order].astype(np.int64)
-    seg_tail = np.arange(1, sub.num_joints)[order]
-    counts = np.bincount(owner, minlength=skeleton.num_joints)
-    # Leaf joints own no segment: their weight stays on the joint itself (a zero-length segment).
-    lonely = np.flatnonzero(counts == 0)
-    seg_head = np.concatenate([seg_head, hierarchy.original[lonely]])
-    seg_tail = np.concatenate([seg_tail, hierarchy.original[lonely]])
-    owner_sorted = np.concatenate([owner[order], lonely])
-    order = np.argsort(owner_sorted, kind="stable")
-    seg_head, seg_tail, owner_sorted = seg_head[order], seg_tail[order], owner_sorted[order]
-    counts = np.bincount(owner_sorted, minlength=skeleton.num_joints)
-    seg_start = np.concatenate([[0], np.cumsum(counts)])
-
-    # Every (vertex, original joint, weight) entry, expanded to one row per owned segment.
     vertex = np.repeat(np.arange(skin.num_vertices), skin.joints.shape[1])
     original = to_original[skin.joints.ravel()]
     weight = skin.weights.ravel()
     keep = weight > 0
     vertex, original, weight = vertex[keep], original[keep], weight[keep]
-    per_entry = counts[original]
-    floor = 1e-6 * max(sub.height(), 1e-9)
-    # In blocks of whole entries of about a million segment rows: a joint that owns hundreds of
-    # sub-links (a root with many children) would otherwise expand to gigabytes. Each entry
-    # keeps only its strongest few rows: a vertex's strongest influences are among them.
-    ends = np.cumsum(per_entry)
+    per_entry = links.count[original]
     rows, cols, vals = [], [], []
+    ends = np.cumsum(per_entry)
     first = 0
+    # In blocks of about a million (entry, link) rows: a root with hundreds of children stays small.
     while first < len(vertex):
         last = max(first + 1, int(np.searchsorted(ends, (ends[first - 1] if first else 0) + 1_000_000, "right")))
         block = np.arange(first, last)
         count = per_entry[block]
         entry = np.repeat(np.arange(len(block)), count)
         within = np.arange(len(entry)) - np.repeat(np.cumsum(count) - count, count)
-        segment = seg_start[original[block]][entry] + within
-        distance = segment_distance(skin.vertices[vertex[block][entry]], rest[seg_head[segment]], rest[seg_tail[segment]])
-        inverse = 1.0 / np.maximum(distance, floor)
-        values = inverse / np.bincount(entry, weights=inverse, minlength=len(block))[entry] * weight[block][entry]
-        # Segments that start at the same sub-joint (a hip's links to each leg) are one influence:
-        # sum them per (entry, sub-joint) first, then keep each entry's strongest sub-joints.
-        heads = seg_head[segment]
-        order = np.lexsort((heads, entry))
-        new = np.concatenate([[True], (entry[order][1:] != entry[order][:-1]) | (heads[order][1:] != heads[order][:-1])])
-        starts = np.flatnonzero(new)
-        pair_entry, pair_head = entry[order][starts], heads[order][starts]
-        pair_value = np.add.reduceat(values[order], starts)
-        ranked = np.lexsort((-pair_value, pair_entry))  # by entry, strongest first
-        sizes = np.bincount(pair_entry, minlength=len(block))
-        rank = np.arange(len(ranked)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-        strongest = ranked[rank < max_influences]
-        rows.append(vertex[block][pair_entry[strongest]])
-        cols.append(pair_head[strongest])
-        vals.append(pair_value[strongest])
+        link = links.start[original[block]][entry] + within
+        point = skin.vertices[vertex[block][entry]]
+        head, tail = links.head[link], links.tail[link]
+        span = tail - head
+        length2 = np.einsum("ij,ij->i", span, span)
+        along = np.einsum("ij,ij->i", point - head, span) / np.maximum(length2, 1e-300)
+        along = np.where(length2 > 0, along, 1.0)
+        # Nearness to each of an entry's links: (nearest / distance)^8, the faintest (under 1 %) dropped.
+        distance = segment_distance(point, head, tail)
+        nearest = np.full(len(block), np.inf)
+        np.minimum.at(nearest, entry, distance)
+        share = (np.maximum(nearest[entry], 1e-12) / np.maximum(distance, 1e-12)) ** 8
+        share = share / np.bincount(entry, share, minlength=len(block))[entry]
+        share = np.where(share < 0.01, 0.0, share)
+        share = share / np.bincount(entry, share, minlength=len(block))[entry]
+        # Along the link: linear hand-over between the owners' peaks.
+        knots, owners = links.knots[link], links.owners[link]
+        along = np.clip(along, knots[:, 0], np.nanmax(knots, axis=1))
+        slot = np.clip(np.sum(knots <= along[:, None], axis=1) - 1, 0, knots.shape[1] - 2)
+        left = knots[np.arange(len(link)), slot]
+        right = knots[np.arange(len(link)), slot + 1]
+        u = np.where(np.isfinite(right) & (right > left), (along - left) / np.where(right > left, right - left, 1.0), 0.0)
+        u = np.clip(u, 0.0, 1.0)
+        base = (weight[block][entry] * share)
+        for owner, part in ((owners[np.arange(len(link)), slot], 1.0 - u), (owners[np.arange(len(link)), slot + 1], u)):
+            value = base * part
+            keep = value > 0
+            rows.append(vertex[block][entry][keep])
+            cols.append(owner[keep])
+            vals.append(value[keep])
         first = last
     joints, weights = top_influences(np.concatenate(rows or [np.zeros(0, np.int64)]),
                                      np.concatenate(cols or [np.zeros(0, np.int64)]),
                                      np.concatenate(vals or [np.zeros(0)]), skin.num_vertices, max_influences)
     return Skin(skin.vertices, skin.faces, sub.names, joints, weights)
+
+
+class _Links(NamedTuple):
+    """Each original joint's outgoing links, as the rows ``start[k]:start[k] + count[k]``.
+
+    head, tail : (L, 3) the link's ends in the bind pose (for an end joint, the link into it)
+    knots : (L, M) where each owner peaks, in link lengths from the head (NaN-padded, increasing)
+    owners : (L, M) the rubber joint that peaks there (0 where padded)
+    """
+
+    start: np.ndarray
+    count: np.ndarray
+    head: np.ndarray
+    tail: np.ndarray
+    knots: np.ndarray
+    owners: np.ndarray
+
+
+def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarray) -> _Links:
+    sub = hierarchy.skeleton
+    count = skeleton.num_joints
+    original = hierarchy.original
+    height = max(skeleton.height(), 1e-12)
+    placed = rest[original]
+    length = np.linalg.norm(placed - placed[np.maximum(skeleton.parents, 0)], axis=1)
+    length[0] = 0.0
+    moving = ~hierarchy.rigid
+    real = moving & (length > 1e-4 * height)
+    real[0] = False
+    # The owners of each link's sub-links, from its head: a joint owns the sub-link that starts at it.
+    owners_of: dict[int, list[int]] = {}
+    for j in range(1, sub.num_joints):
+        c = int(hierarchy.link_child[j])
+        if j == original[c]:
+            continue
+        owners_of.setdefault(c, []).append(j)
+    chains: dict[int, list[int]] = {}
+    for c in np.flatnonzero(real):
+        below = [int(parent_owner) for parent_owner in owners_of.get(int(c), [])]
+        chain = [int(original[skeleton.parents[c]])] if not below or sub.offsets[below[0]].any() else []
+        chains[int(c)] = chain + below  # with a start joint, its own zero link is not a sub-link
+    kids = [[int(c) for c in skeleton.children(k) if real[c]] for k in range(count)]
+
+    def peaks(c: int) -> tuple[np.ndarray, list[int]]:
+        owners = chains[c]
+        return (np.arange(len(owners)) + 0.5) / len(owners), owners
+
+    def before(k: int, scale: float) -> tuple[list[float], list[int]]:
+        """The peak of the last sub-link of the link into ``k``, in units of ``scale``."""
+        if k > 0 and real[k]:
+            at, owners = peaks(k)
+            return [(at[-1] - 1.0) * length[k] / scale], [owners[-1]]
+        return [], []
+
+    def after(c: int, scale: float) -> tuple[list[float], list[int]]:
+        """The peak of the first sub-link of the link the chain goes on through from ``c``."""
+        if len(kids[c]) == 1:
+            at, owners = peaks(kids[c][0])
+            return [1.0 + at[0] * length[kids[c][0]] / scale], [owners[0]]
+        return [1.0], [int(original[c])]
+
+    heads, tails, knot_rows, owner_rows, starts, counts = [], [], [], [], [], []
+    for k in range(count):
+        starts.append(len(heads))
+        if moving[k] and kids[k]:
+            for c in kids[k]:
+                at, owners = peaks(c)
+                k0, o0 = before(k, length[c])
+                k1, o1 = after(c, length[c])
+                heads.append(placed[k])
+                tails.append(placed[c])
+                knot_rows.append(k0 + list(at) + k1)
+                owner_rows.append(o0 + owners + o1)
+        elif moving[k] and real[k]:  # an end joint: its weight stays, handing over to the link into it
+            at, owners = peaks(k)
+            heads.append(placed[skeleton.parents[k]])
+            tails.append(placed[k])
+            knot_rows.append([at[-1], 1.0])
+            owner_rows.append([owners[-1], int(original[k])])
+        else:  # a rider, the root, or a joint at its parent's place: its weight stays on it
+            heads.append(placed[k])
+            tails.append(placed[k])
+            knot_rows.append([1.0])
+            owner_rows.append([int(original[k])])
+        counts.append(len(heads) - starts[-1])
+    width = max(len(r) for r in knot_rows) + 1
+    knots = np.full((len(knot_rows), width), np.nan)
+    owners = np.zeros((len(knot_rows), width), dtype=np.int64)
+    for i, (r, o) in enumerate(zip(knot_rows, owner_rows)):
+        knots[i, : len(r)] = r
+        owners[i, : len(o)] = o
+    return _Links(np.array(starts), np.array(counts), np.array(heads), np.array(tails), knots, owners)
 
 
 def subjoint_bind_positions(skeleton: Skeleton, hierarchy: SubjointHierarchy, bind: dict | None = None) -> np.ndarray:
@@ -213,10 +317,3 @@ def subjoint_bind_positions(skeleton: Skeleton, hierarchy: SubjointHierarchy, bi
     f = hierarchy.fraction[:, None]
     parent = np.where(hierarchy.link_parent < 0, hierarchy.link_child, hierarchy.link_parent)
     return (1 - f) * positions[parent] + f * positions[hierarchy.link_child]
-
-
-def _owner(hierarchy: SubjointHierarchy, joint: int) -> int:
-    """The original joint whose bone a sub-joint belongs to: itself, or the link's parent."""
-    if hierarchy.fraction[joint] == 1.0:
-        return int(hierarchy.link_child[joint])
-    return int(hierarchy.link_parent[joint])
