@@ -134,11 +134,12 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
     linearly to its neighbours, and past the link's ends to the last sub-link
     of the link before and the first of the link after (a knee blends the
     thigh into the shin; on a stretched chain the skin stretches evenly, as
-    the joints do). A branch joint (hips, chest) shares its weight among its
-    outgoing links by nearness, so a left buttock takes nothing from the right
-    thigh or the spine. An end joint (a hand, a head) keeps its weight, handing
-    over to the link before it where a vertex lies short of the joint; riders
-    (fingers, toes) keep theirs.
+    the joints do). The hand-over crosses a joint only where the chain goes on
+    through it (one link in, one out), where the bones' frames meet smoothly. A
+    branch joint (hips, chest) shares its weight among its outgoing links by
+    nearness, so a left buttock takes nothing from the right thigh or the
+    spine. End joints (a hand, a head) and riders (fingers, toes) keep their
+    weight: their frames turn away from the link's (a nod, a bent wrist).
 
     Kwon and Lee share the weight by the inverse distance to every sub-link of
     the joint; that spreads a branch joint over the sub-links of all its child
@@ -252,9 +253,11 @@ def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarr
         owners = chains[c]
         return (np.arange(len(owners)) + 0.5) / len(owners), owners
 
+    # Across a joint the chain goes on through (one link in, one out), its bones' frames meet
+    # smoothly (the curve and its twist run on); at a branch, a hand or a head they do not.
     def before(k: int, scale: float) -> tuple[list[float], list[int]]:
         """The peak of the last sub-link of the link into ``k``, in units of ``scale``."""
-        if k > 0 and real[k]:
+        if k > 0 and real[k] and len(kids[k]) == 1:
             at, owners = peaks(k)
             return [(at[-1] - 1.0) * length[k] / scale], [owners[-1]]
         return [], []
@@ -264,7 +267,7 @@ def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarr
         if len(kids[c]) == 1:
             at, owners = peaks(kids[c][0])
             return [1.0 + at[0] * length[kids[c][0]] / scale], [owners[0]]
-        return [1.0], [int(original[c])]
+        return [], []
 
     heads, tails, knot_rows, owner_rows, starts, counts = [], [], [], [], [], []
     for k in range(count):
@@ -278,13 +281,7 @@ def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarr
                 tails.append(placed[c])
                 knot_rows.append(k0 + list(at) + k1)
                 owner_rows.append(o0 + owners + o1)
-        elif moving[k] and real[k]:  # an end joint: its weight stays, handing over to the link into it
-            at, owners = peaks(k)
-            heads.append(placed[skeleton.parents[k]])
-            tails.append(placed[k])
-            knot_rows.append([at[-1], 1.0])
-            owner_rows.append([owners[-1], int(original[k])])
-        else:  # a rider, the root, or a joint at its parent's place: its weight stays on it
+        else:  # an end joint (a hand, a head), a rider, the root: its weight stays on it
             heads.append(placed[k])
             tails.append(placed[k])
             knot_rows.append([1.0])
