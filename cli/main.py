@@ -141,6 +141,10 @@ def pipeline_options(func: Callable) -> Callable:
         click.option("--springs/--no-springs", "springs_on", default=None, help="Switch the follow-through on or off."),
         click.option("--skeleton", "skeleton_mode", type=click.Choice(["sub", "original"]), default=None,
                      help="Write the rubber sub-joint skeleton (sub) or the original joints only (original)."),
+        click.option("--bvh-positions", "bvh_positions", type=click.Choice(["standard", "input"]), default=None,
+                     help="BVH position channels: standard (each joint's translation, replacing its OFFSET: what "
+                          "Blender, bvhio and MotionBuilder read) or input (the input's own convention: added to "
+                          "the OFFSETs for iClone and MakeHuman clips, for re-import into iClone). Default standard."),
         click.option("--stretch", "stretches", multiple=True, callback=_parsed_each(parse_stretch), metavar="SPEC",
                      help="Squash/stretch a limb along its path: LIMB:START-END:SCALE[:axes=xz][:pivot=end]"
                           "[:ease_in=0.6,0.2][:ease_out=0.3,0.8][:blend=1][:release=0.1s]; frames or 1.2s. "
@@ -213,7 +217,7 @@ def _overrides(p: dict[str, Any]) -> dict[str, Any]:
         ("springs", "enabled", p["springs_on"]), ("springs", "stiffness", p["stiffness"]),
         ("springs", "link_stiffness", p["link_stiffness"]), ("springs", "damping", p["damping"]),
         ("springs", "blend", p["blend"]),
-        ("output", "skeleton", p["skeleton_mode"]),
+        ("output", "skeleton", p["skeleton_mode"]), ("output", "bvh_positions", p["bvh_positions"]),
         ("auto_stretch", "enabled", p["auto_stretch_on"]),
         ("contacts", "enabled", None if p["contacts_mode"] is None else p["contacts_mode"] == "auto"),
         ("contacts", "anchor", p["anchor"]), ("contacts", "floor", p["floor_on"]),
@@ -343,6 +347,7 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
       mocap-exaggerate exaggerate walk.bvh -o out/ --sigma 18f --omega 3 --no-correct
       mocap-exaggerate exaggerate walk.bvh -o out/ --subjoints 6 --blend 0.7 --stiffness 100
       mocap-exaggerate exaggerate walk.bvh -o out/ --skeleton original   # original joint set
+      mocap-exaggerate exaggerate iclone.bvh -o out/ --bvh-positions input   # back into iClone
       mocap-exaggerate exaggerate punch.bvh -o out/ --stretch "left_arm:120-160:3:axes=xz:ease_in=0.6,0.2"
       mocap-exaggerate exaggerate fight.bvh -o out/ --preset looney --auto-stretch -v
       mocap-exaggerate exaggerate walk.bvh run.bvh jump.bvh -o out/

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError, check_number
-from .io.bvh import FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES
+from .io.bvh import BVH_POSITIONS, FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES
 from .stages.contacts import ContactConfig, TargetSpec
 from .stages.correct import CorrectConfig
 from .stages.extrapolate import ExtrapolateConfig
@@ -78,13 +78,22 @@ class OutputConfig:
     skeleton : ``sub`` writes the rubber sub-joint hierarchy; ``original``
         the original joints only (6 channels each), for pipelines that need
         the original joint set.
+    bvh_positions : ``standard`` writes the BVH's position channels as each joint's
+        translation, replacing its OFFSET (what Blender, bvhio and MotionBuilder
+        read), whatever the input used; ``input`` writes them in the input's own
+        convention (added to the OFFSETs for an iClone or MakeHuman clip), for
+        re-import into iClone.
     """
 
     skeleton: str = "sub"
+    bvh_positions: str = "standard"
 
     def __post_init__(self) -> None:
         if self.skeleton not in _SKELETON_MODES:
             raise ConfigError(f"output.skeleton must be one of {', '.join(_SKELETON_MODES)}, got {self.skeleton!r}")
+        if self.bvh_positions not in BVH_POSITIONS:
+            raise ConfigError(f"output.bvh_positions must be one of {', '.join(BVH_POSITIONS)}, "
+                              f"got {self.bvh_positions!r:.60}")
 
 
 _BLOCKS = {

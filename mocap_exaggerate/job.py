@@ -295,12 +295,12 @@ def convert(
             building = None
         tick = time.perf_counter()
         if to_stream:
-            for piece in iter_bvh(result.motion):
+            for piece in iter_bvh(result.motion, positions=config.output.bvh_positions):
                 output.write(piece)
             if hasattr(output, "flush"):
                 output.flush()
         else:
-            outputs["bvh"] = written.add(targets["bvh"], iter_bvh(result.motion))
+            outputs["bvh"] = written.add(targets["bvh"], iter_bvh(result.motion, positions=config.output.bvh_positions))
         timings["write"] = time.perf_counter() - tick
         if building is not None:
             (glb_pieces, weights, units_used), timings["glb"] = building.result()

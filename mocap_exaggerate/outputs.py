@@ -15,6 +15,7 @@ import numpy as np
 from . import __version__
 from .config import PipelineConfig
 from .errors import ConfigError
+from .io.bvh import written_positions
 from .motion import Motion
 from .pipeline import PipelineResult
 from .skinning import Skin, top_influences
@@ -62,6 +63,8 @@ def manifest(
             "joints": result.motion.skeleton.num_joints,
             "max_link_stretch": round(result.max_link_stretch, 6),
             "skeleton": config.output.skeleton,
+            # What the BVH's position channels do to the OFFSETs, as written (output.bvh_positions).
+            "bvh_position_channels": written_positions(result.motion.skeleton, config.output.bvh_positions),
         },
         "warnings": list(reader_warnings) + list(result.notes),
         "timings": timings,

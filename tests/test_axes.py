@@ -65,7 +65,8 @@ def test_up_given_wins_and_is_recorded():
 def test_reallusion_root_channels_add_to_the_offset(tmp_path):
     """iClone: the root OFFSET is the hips' height and its channels move it. Read as replacing it
     (bvhio, Blender) the body stands a metre under the floor; auto reads them as adding, so the
-    feet are on it, and the written BVH keeps the file's own numbers and convention."""
+    feet are on it. The written BVH is in the standard convention (the root's channels are its
+    position, the hips' height up); asked for, it keeps the file's own numbers and convention."""
     path = shared("cmu_06_15_basketball_dribble_shoot_iclone.bvh")
     added, report = read_bvh(path)
     replaced, replace_report = read_bvh(path, root_offset="replace")
@@ -75,11 +76,17 @@ def test_reallusion_root_channels_add_to_the_offset(tmp_path):
     assert -0.02 * height < lowest < 0.1 * height
     dropped = added.world_positions() - replaced.world_positions()
     np.testing.assert_allclose(dropped, np.broadcast_to(added.skeleton.offsets[0], dropped.shape), atol=1e-6)
-    # The root's channel values go back out as they came in (the file's own convention).
-    text = format_bvh(added).decode()
     source = path.read_text()
-    ours, theirs = (t.split("Frame Time:")[1].splitlines()[1].split()[:3] for t in (text, source))
-    assert [float(v) for v in ours] == pytest.approx([float(v) for v in theirs], abs=1e-6)
+    first_row = lambda text: [float(v) for v in text.split("Frame Time:")[1].splitlines()[1].split()[:3]]
+    # By default the root's channels are its position, the OFFSET replaced: every reader's convention.
+    text = format_bvh(added).decode()
+    assert first_row(text) == pytest.approx(np.array(first_row(source)) + added.skeleton.offsets[0], abs=1e-5)
+    again, again_report = read_bvh(text.encode())
+    assert again_report.root_offset == "replace"
+    np.testing.assert_allclose(again.world_positions(), added.world_positions(), atol=1e-4)
+    # Asked for, the root's channel values go back out as they came in (the file's own convention).
+    text = format_bvh(added, positions="input").decode()
+    assert first_row(text) == pytest.approx(first_row(source), abs=1e-6)
     again, again_report = read_bvh(text.encode())
     assert again_report.root_offset == "add"
     np.testing.assert_allclose(again.world_positions(), added.world_positions(), atol=1e-4)
@@ -105,7 +112,8 @@ def test_root_offset_on_the_command_line(given, tmp_path):
                            "-o", str(tmp_path), "--root-offset", given, "--no-glb"], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert f'root_offset = "{given}"' in (tmp_path / f"{path.stem}.pipeline.toml").read_text()
-    written, report = read_bvh(tmp_path / f"{path.stem}.bvh", root_offset=given)
+    written, report = read_bvh(tmp_path / f"{path.stem}.bvh")  # written in the standard convention
+    assert report.root_offset == "replace"
     lowest = np.percentile(written.world_positions()[..., 1].min(axis=1), 5)
     assert (lowest > -0.05 * written.skeleton.height()) == (given == "add")
     bad = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "exaggerate", str(path),

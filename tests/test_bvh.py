@@ -29,10 +29,10 @@ EXPECTED = {
 }
 
 
-def channel_values(motion):
+def channel_values(motion, positions="standard"):
     from mocap_exaggerate.io.bvh import motion_channels
 
-    return motion_channels(motion)
+    return motion_channels(motion, positions=positions)
 
 
 @pytest.mark.parametrize("path", all_clip_params())
@@ -49,22 +49,30 @@ def test_reads_counts_from_sources_table(path):
 
 @pytest.mark.parametrize("path", all_clip_params())
 def test_round_trip_keeps_every_channel_and_the_layout(path):
-    motion, _ = read_bvh(path)
-    data = format_bvh(motion)
+    """Written in the input's own convention (``positions="input"``), a clip goes back out channel
+    for channel; written in the standard one (the default), it reads back as the same motion."""
+    motion, report = read_bvh(path)
+    standard, standard_report = read_bvh(format_bvh(motion))
+    assert standard_report.root_offset == "replace"
+    np.testing.assert_allclose(standard.world_positions(), motion.world_positions(), atol=1e-5 * motion.skeleton.height())
+    data = format_bvh(motion, positions="input")
+    if report.root_offset == "replace":
+        assert data == format_bvh(motion)
     again, _ = read_bvh(data)
+    assert again.skeleton.positions == motion.skeleton.positions
     assert again.skeleton.names == motion.skeleton.names
     assert again.skeleton.channels == motion.skeleton.channels
     assert np.array_equal(again.skeleton.parents, motion.skeleton.parents)
     assert np.allclose(again.skeleton.offsets, motion.skeleton.offsets, atol=1e-6)
     assert np.allclose(again.skeleton.end_sites, motion.skeleton.end_sites, atol=1e-6, equal_nan=True)
     assert again.frame_time == pytest.approx(motion.frame_time, rel=1e-12)
-    assert np.max(np.abs(channel_values(again) - channel_values(motion))) <= 1e-4
+    assert np.max(np.abs(channel_values(again, "input") - channel_values(motion, "input"))) <= 1e-4
     # Raw numbers in the source file agree too (the reader does not alter them).
     raw = np.array(path.read_bytes().split()[-(motion.num_frames * motion.skeleton.num_channels):], dtype=float)
     if "boxing" not in path.stem:  # that file has one row more than declared
-        assert np.max(np.abs(channel_values(again).ravel() - raw)) <= 1e-4
+        assert np.max(np.abs(channel_values(again, "input").ravel() - raw)) <= 1e-4
     # Written a second time, the bytes are the same.
-    assert format_bvh(again) == data
+    assert format_bvh(again, positions="input") == data
 
 
 def test_written_numbers_are_fixed_point_with_lf_and_full_frame_time(sample_clip):

@@ -7,11 +7,13 @@ count the values on each line, and the numbers are converted in one call.
 Writing formats whole blocks of frames with one ``%`` operation.
 
 Position channels replace the joint's OFFSET (the convention of bvhio,
-Blender and most readers) or add to it (Reallusion/iClone and MakeHuman
-exports): ``root_offset="auto"`` tells the two apart (`position_mode`), the
-skeleton remembers which (``Skeleton.positions``) and the writer keeps it, so
-a clip goes back out in its own convention. Joints without position channels
-use the OFFSET.
+Blender, MotionBuilder and most readers) or add to it (Reallusion/iClone and
+MakeHuman exports): ``root_offset="auto"`` tells the two apart on reading
+(`position_mode`), and the skeleton remembers which (``Skeleton.positions``).
+The writer writes the standard convention, replacing, whatever the input used
+(``positions="standard"``), so every reader puts the joints where we computed
+them; ``positions="input"`` writes the input's own convention back (adding,
+for re-import into iClone). Joints without position channels use the OFFSET.
 """
 
 from __future__ import annotations
@@ -27,13 +29,14 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import ConfigError, InputError
 from ..motion import Motion
 from ..rotations import quat_from_euler, quat_to_euler
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .files import atomic_write
 
-__all__ = ["BVHReport", "read_bvh", "read_source", "load_bvh", "save_bvh", "format_bvh", "iter_bvh", "format_fixed", "motion_channels"]
+__all__ = ["BVHReport", "read_bvh", "read_source", "load_bvh", "save_bvh", "format_bvh", "iter_bvh", "format_fixed", "motion_channels",
+           "BVH_POSITIONS", "check_bvh_positions", "written_positions"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +61,9 @@ MAX_JOINTS = 10000
 #: How position channels are read (see `read_bvh`), and the up axes one can give.
 ROOT_OFFSET_MODES = ("auto", "replace", "add")
 UP_AXES = ("auto", "x", "y", "z")
+#: How the writer writes position channels: ``standard`` replaces the OFFSET (what Blender,
+#: bvhio and MotionBuilder read), ``input`` in the convention the clip was read in.
+BVH_POSITIONS = ("standard", "input")
 
 _MOTION_RE = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE | re.IGNORECASE)
 _FRAMES_RE = re.compile(r"^\s*Frames\s*:\s*(\S*)\s*$", re.IGNORECASE)
@@ -576,14 +582,30 @@ def _motion_from_channels(skeleton: Skeleton, values: np.ndarray, frame_time: fl
 # ---------------------------------------------------------------------------- writing
 
 
-def motion_channels(motion: Motion) -> np.ndarray:
-    """The motion as BVH channel values ``(F, C)`` in the skeleton's channel layout."""
-    return np.concatenate(list(_channel_blocks(motion, motion.num_frames)) or [np.zeros((motion.num_frames, 0))])
+def check_bvh_positions(positions: object) -> str:
+    """``positions`` if it is one of `BVH_POSITIONS`, else a ConfigError naming it."""
+    if positions not in BVH_POSITIONS:
+        raise ConfigError(f"bvh positions must be one of {', '.join(BVH_POSITIONS)}, got {positions!r:.60}")
+    return positions
 
 
-def _channel_blocks(motion: Motion, block: int):
+def written_positions(skeleton: Skeleton, positions: str = "standard") -> str:
+    """What the position channels of a file written with ``positions`` do to the OFFSETs:
+    ``replace`` (the standard) or ``add`` (``input`` on a clip read as adding)."""
+    return skeleton.positions if check_bvh_positions(positions) == "input" else "replace"
+
+
+def motion_channels(motion: Motion, *, positions: str = "standard") -> np.ndarray:
+    """The motion as BVH channel values ``(F, C)`` in the skeleton's channel layout
+    (position channels as `format_bvh` writes them with ``positions``)."""
+    blocks = list(_channel_blocks(motion, motion.num_frames, positions))
+    return np.concatenate(blocks or [np.zeros((motion.num_frames, 0))])
+
+
+def _channel_blocks(motion: Motion, block: int, positions: str = "standard"):
     """BVH channel values ``(n, C)`` for consecutive blocks of ``block`` frames."""
     skeleton = motion.skeleton
+    adds = written_positions(skeleton, positions) == "add"
     frames = motion.num_frames
     euler = np.zeros((frames, skeleton.num_joints, 3))
     by_order: dict[str, list[int]] = {}
@@ -610,7 +632,7 @@ def _channel_blocks(motion: Motion, block: int):
         part = slice(start, min(start + block, frames))
         values = np.empty((part.stop - part.start, len(source)))
         values[:, ~source] = motion.local_positions[part][:, joint[~source], component[~source]]
-        if skeleton.positions == "add":  # the file's own convention: displacements from the OFFSETs
+        if adds:  # the input's own convention, asked for: displacements from the OFFSETs
             values[:, ~source] -= skeleton.offsets[joint[~source], component[~source]]
         values[:, source] = euler[part][:, joint[source], component[source]]
         yield values
@@ -721,26 +743,36 @@ def format_fixed(values: np.ndarray, decimals: int = 6) -> bytes:
 _PAIRS = np.array([[48 + i // 10, 48 + i % 10] for i in range(100)], dtype=np.uint8).view(np.uint16).ravel()
 
 
-def format_bvh(motion: Motion) -> bytes:
-    """The whole file as bytes: fixed-point numbers, LF line ends, tabs."""
-    return b"".join(iter_bvh(motion))
+def format_bvh(motion: Motion, *, positions: str = "standard") -> bytes:
+    """The whole file as bytes: fixed-point numbers, LF line ends, tabs.
+
+    positions : ``standard`` (default): position channels are each joint's local
+        translation, replacing its OFFSET, as Blender, bvhio and MotionBuilder read
+        them; ``input``: in the convention the clip was read in (`Skeleton.positions`;
+        displacements added to the OFFSETs for an iClone or MakeHuman clip, for
+        re-import into iClone).
+    """
+    return b"".join(iter_bvh(motion, positions=positions))
 
 
-def iter_bvh(motion: Motion):
-    """The file as consecutive pieces of bytes (the header, then blocks of frames)."""
+def iter_bvh(motion: Motion, *, positions: str = "standard"):
+    """The file as consecutive pieces of bytes (the header, then blocks of frames); see `format_bvh`."""
+    check_bvh_positions(positions)
     if not (np.all(np.isfinite(motion.local_positions)) and np.all(np.isfinite(motion.local_rotations))):
         raise ValueError("motion has NaN or infinite values; refusing to write them")
     yield _format_header(motion).encode("utf-8")
-    for values in _channel_blocks(motion, _BLOCK_FRAMES):
+    for values in _channel_blocks(motion, _BLOCK_FRAMES, positions):
         yield format_fixed(values)
 
 
-def save_bvh(motion: Motion, path: str | os.PathLike | BinaryIO, *, overwrite: bool = True) -> None:
+def save_bvh(motion: Motion, path: str | os.PathLike | BinaryIO, *, overwrite: bool = True,
+             positions: str = "standard") -> None:
     """Write ``motion`` as BVH, atomically (temporary file, then rename).
 
-    ``path`` may be ``"-"`` (standard output) or a binary file object.
+    ``path`` may be ``"-"`` (standard output) or a binary file object. ``positions``:
+    ``standard`` or ``input``, the convention of the position channels (see `format_bvh`).
     """
-    data = format_bvh(motion)
+    data = format_bvh(motion, positions=positions)
     if hasattr(path, "write"):
         path.write(data)
         return
