@@ -382,6 +382,7 @@ OPTIONS = {
     "--influences": st.sampled_from(["4", "8", "5"]),
     "--name": st.sampled_from(["ok", "../up", "a/b", ".dot", "n" * 300]),
     "--skeleton": st.sampled_from(["sub", "original", "both"]),
+    "--bvh-positions": st.sampled_from(["standard", "input", "add", ""]),
 }
 
 
