@@ -166,7 +166,7 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
     first = 0
     # In blocks of about a million (entry, link) rows: a root with hundreds of children stays small.
     while first < len(vertex):
-        last = max(first + 1, int(np.searchsorted(ends, (ends[first - 1] if first else 0) + 1_000_000, "right")))
+        last = max(first + 1, int(np.searchsorted(ends, (ends[first - 1] if first else 0) + _BLOCK_ROWS, "right")))
         block = np.arange(first, last)
         count = per_entry[block]
         entry = np.repeat(np.arange(len(block)), count)
@@ -206,6 +206,10 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
                                      np.concatenate(cols or [np.zeros(0, np.int64)]),
                                      np.concatenate(vals or [np.zeros(0)]), skin.num_vertices, max_influences)
     return Skin(skin.vertices, skin.faces, sub.names, joints, weights)
+
+
+#: (entry, link) rows re-weighted at once.
+_BLOCK_ROWS = 1_000_000
 
 
 class _Links(NamedTuple):

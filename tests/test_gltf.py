@@ -23,7 +23,7 @@ from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.skinning import Skin
 from mocap_exaggerate.rotations import quat_mul, quat_rotate
 from mocap_exaggerate.body import default_skin
-from mocap_exaggerate.skinning import reweight, segment_distance, subjoint_bind_positions
+from mocap_exaggerate.skinning import reweight, subjoint_bind_positions
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 
 from .helpers import ROOT, SHARED_BVH, all_clip_params, shared, skinned_vertices
@@ -107,29 +107,27 @@ def test_default_body_is_closed_watertight_pieces_on_every_sample_clip():
         assert np.allclose(body.weights.sum(axis=1), 1.0)
 
 
-def test_reweighting_splits_each_weight_by_inverse_distance(sample_clip):
+def test_reweighting_shares_each_weight_along_the_link_by_where_the_vertex_lies(sample_clip):
+    # Each sub-link's owner peaks at the sub-link's middle (1/8, 3/8, 5/8, 7/8 of a link cut in four)
+    # and hands over linearly to the next: worked out by hand for vertices at 0.2, 0.5 and 0.8.
     motion, _ = read_bvh(sample_clip)
     skeleton = motion.skeleton
     hierarchy = build_hierarchy(skeleton)
     arm = skeleton.index("lShldr")
     rest = skeleton.rest_positions()
     elbow = skeleton.index("lForeArm")
-    # Three vertices beside the upper arm, each bound only to it.
-    along = rest[arm] + np.array([0.2, 0.5, 0.8])[:, None] * (rest[elbow] - rest[arm]) + np.array([0, 0, 3.0])
+    # Three vertices beside the upper arm (3 units off it, square to it), each bound only to it.
+    link = rest[elbow] - rest[arm]
+    beside = np.cross(link, [0.0, 1.0, 0.0])
+    along = rest[arm] + np.array([0.2, 0.5, 0.8])[:, None] * link + 3.0 * beside / np.linalg.norm(beside)
     skin = Skin(along, np.array([[0, 1, 2]]), ("lShldr",), np.zeros((3, 1), int), np.ones((3, 1)))
     out = reweight(skin, skeleton, hierarchy, max_influences=8)
-    bind = subjoint_bind_positions(skeleton, hierarchy)
     names = out.joint_names
+    expected = [{"lShldr": 0.7, "lForeArm_s1": 0.3}, {"lForeArm_s1": 0.5, "lForeArm_s2": 0.5},
+                {"lForeArm_s2": 0.3, "lForeArm_s3": 0.7}]
     for v in range(3):
-        w = out.weights[v][out.weights[v] > 0]
-        j = out.joints[v][out.weights[v] > 0]
-        assert w.sum() == pytest.approx(1.0)
-        assert {names[k] for k in j} <= {"lShldr", "lForeArm_s1", "lForeArm_s2", "lForeArm_s3"}
-        # In proportion to the inverse distance to each sub-link segment (the one starting at the
-        # joint; sub-joints are numbered along the link, so it ends at the next index).
-        distance = segment_distance(along[v], bind[j], bind[j + 1])
-        assert np.allclose(w * distance, (w * distance)[0], rtol=1e-9)
-        assert len(w) == 4  # the shoulder and the three sub-joints share the upper arm
+        got = {names[j]: w for j, w in zip(out.joints[v], out.weights[v]) if w > 0}
+        assert got == pytest.approx(expected[v], abs=1e-9)
 
 
 def test_makehuman_skin_reweights_fast_and_sensibly():
@@ -251,37 +249,18 @@ def test_vertex_normals_are_trimeshs(sample_clip):
     np.testing.assert_allclose(np.linalg.norm(lonely, axis=1), 1.0)
 
 
-def test_blocked_reweighting_equals_the_whole_expansion(sample_clip):
-    """The blocked, pruned re-weighting gives what expanding every entry over every owned segment gives."""
-    from mocap_exaggerate.skinning import _owner, top_influences
+def test_blocked_reweighting_equals_the_whole_expansion(sample_clip, monkeypatch):
+    """Re-weighting in blocks of a few rows gives what one block of everything gives."""
+    import mocap_exaggerate.skinning as skinning
 
     skeleton = read_bvh(sample_clip)[0].skeleton
-    hierarchy = build_hierarchy(skeleton)
+    hierarchy = run(read_bvh(sample_clip)[0].slice(slice(0, 5)), load_preset("cartoon")).hierarchy
     skin = default_skin(skeleton, hierarchy.rigid)
-    sub = hierarchy.skeleton
-    rest = subjoint_bind_positions(skeleton, hierarchy)
-    owner = np.array([_owner(hierarchy, int(p)) for p in sub.parents[1:]])
-    rows, cols, vals = [], [], []
-    for v in range(skin.num_vertices):
-        for j, w in zip(skin.joints[v], skin.weights[v]):
-            if w <= 0:
-                continue
-            mine = np.flatnonzero(owner == j)
-            heads, tails = sub.parents[1:][mine], np.arange(1, sub.num_joints)[mine]
-            if not len(mine):
-                heads = tails = np.array([hierarchy.original[j]])
-            d = np.maximum(segment_distance(skin.vertices[v], rest[heads], rest[tails]), 1e-6 * sub.height())
-            rows += [v] * len(heads)
-            cols += list(heads)
-            vals += list(w * (1 / d) / np.sum(1 / d))
-    joints, weights = top_influences(np.array(rows), np.array(cols), np.array(vals), skin.num_vertices, 4)
-    fast = reweight(skin, skeleton, hierarchy)
-    def dense(j, w):
-        out = np.zeros((skin.num_vertices, sub.num_joints))
-        np.add.at(out, (np.repeat(np.arange(skin.num_vertices), j.shape[1]), j.ravel()), w.ravel())
-        return out
-
-    np.testing.assert_allclose(dense(fast.joints, fast.weights), dense(joints, weights), atol=1e-12)
+    whole = reweight(skin, skeleton, hierarchy)
+    monkeypatch.setattr(skinning, "_BLOCK_ROWS", 7)
+    blocked = reweight(skin, skeleton, hierarchy)
+    np.testing.assert_array_equal(blocked.joints, whole.joints)
+    np.testing.assert_allclose(blocked.weights, whole.weights, atol=1e-15)
 
 
 def test_gltf_json_is_pygltflibs_text(tmp_path):
