@@ -261,49 +261,46 @@ def build_hierarchy(skeleton: Skeleton, config: SubjointConfig | None = None) ->
     cuts[(lengths < 1e-4 * skeleton.height()) | rigid] = 1  # zero (or hair-thin) links are not cut
     cuts[0] = 1
 
-    names: list[str] = []
-    parents: list[int] = []
-    offsets: list[np.ndarray] = []
-    channels: list[tuple[str, ...]] = []
-    end_sites: list[np.ndarray] = []
-    link_child: list[int] = []
-    link_parent: list[int] = []
-    fraction: list[float] = []
+    joints = _Joints(skeleton.names)
     original = np.empty(skeleton.num_joints, dtype=np.int64)
-    taken = set(skeleton.names)
     for j in range(skeleton.num_joints):
         order = skeleton.rotation_order(j)
         joint_channels = POSITION_CHANNELS + tuple(f"{a}rotation" for a in order)
         parent = -1 if j == 0 else int(original[skeleton.parents[j]])
         step = skeleton.offsets[j] / cuts[j]
+        above = int(skeleton.parents[j])
         for k in range(1, cuts[j]):
-            name = f"{skeleton.names[j]}_s{k}"
-            while name in taken:
-                name += "_"
-            taken.add(name)
-            names.append(name)
-            parents.append(parent)
-            offsets.append(step)
-            channels.append(joint_channels)
-            end_sites.append(np.full(3, np.nan))
-            link_child.append(j)
-            link_parent.append(int(skeleton.parents[j]))
-            fraction.append(k / cuts[j])
-            parent = len(names) - 1
-        original[j] = len(names)
-        names.append(skeleton.names[j])
-        parents.append(parent)
-        offsets.append(step if j > 0 else skeleton.offsets[0])
-        channels.append(joint_channels)
-        end_sites.append(skeleton.end_sites[j])
-        link_child.append(j)
-        link_parent.append(int(skeleton.parents[j]))
-        fraction.append(1.0)
-    sub = Skeleton(tuple(names), np.array(parents), np.array(offsets), tuple(channels), np.array(end_sites),
-                   skeleton.positions, skeleton.up)
-    return SubjointHierarchy(
-        sub, original, np.array(link_child), np.array(link_parent), np.array(fraction), rigid, groups
-    )
+            parent = joints.add(joints.fresh(f"{skeleton.names[j]}_s{k}"), parent, step, joint_channels,
+                                np.full(3, np.nan), j, above, k / cuts[j])
+        original[j] = joints.add(skeleton.names[j], parent, step if j > 0 else skeleton.offsets[0], joint_channels,
+                                 skeleton.end_sites[j], j, above, 1.0)
+    return joints.hierarchy(skeleton, original, rigid, groups)
+
+
+class _Joints:
+    """A rubber skeleton's joints, added parent before child, and where each lies on the original."""
+
+    def __init__(self, taken) -> None:
+        self.rows: list[tuple] = []
+        self.taken = set(taken)
+
+    def fresh(self, name: str) -> str:
+        """``name``, or ``name_``, ``name__`` ... where a joint already has it."""
+        while name in self.taken:
+            name += "_"
+        self.taken.add(name)
+        return name
+
+    def add(self, name, parent, offset, channels, end_site, link_child, link_parent, fraction) -> int:
+        self.rows.append((name, parent, offset, channels, end_site, link_child, link_parent, fraction))
+        return len(self.rows) - 1
+
+    def hierarchy(self, like: Skeleton, original, rigid, groups) -> SubjointHierarchy:
+        names, parents, offsets, channels, ends, child, above, fraction = zip(*self.rows)
+        skeleton = Skeleton(names, np.array(parents), np.array(offsets), channels, np.array(ends), like.positions,
+                            like.up)
+        return SubjointHierarchy(skeleton, np.asarray(original), np.array(child), np.array(above),
+                                 np.array(fraction, dtype=np.float64), rigid, groups)
 
 
 @functools.lru_cache(maxsize=16)
@@ -327,44 +324,16 @@ def link_starts(hierarchy: SubjointHierarchy) -> SubjointHierarchy:
     sub = hierarchy.skeleton
     starts = set(int(j) for j in first)
     new_index = np.empty(sub.num_joints, dtype=np.int64)
-    names: list[str] = []
-    parents: list[int] = []
-    offsets: list[np.ndarray] = []
-    channels: list[tuple[str, ...]] = []
-    end_sites: list[np.ndarray] = []
-    link_child: list[int] = []
-    link_parent: list[int] = []
-    fraction: list[float] = []
-    taken = set(sub.names)
+    joints = _Joints(sub.names)
     for j in range(sub.num_joints):
         parent = int(new_index[sub.parents[j]]) if j > 0 else -1
+        child, above = int(hierarchy.link_child[j]), int(hierarchy.link_parent[j])
         if j in starts:
-            name = f"{hierarchy.skeleton.names[hierarchy.original[hierarchy.link_child[j]]]}_s0"
-            while name in taken:
-                name += "_"
-            taken.add(name)
-            names.append(name)
-            parents.append(parent)
-            offsets.append(np.zeros(3))
-            channels.append(sub.channels[j])
-            end_sites.append(np.full(3, np.nan))
-            link_child.append(int(hierarchy.link_child[j]))
-            link_parent.append(int(hierarchy.link_parent[j]))
-            fraction.append(0.0)
-            parent = len(names) - 1
-        new_index[j] = len(names)
-        names.append(sub.names[j])
-        parents.append(parent)
-        offsets.append(sub.offsets[j])
-        channels.append(sub.channels[j])
-        end_sites.append(sub.end_sites[j])
-        link_child.append(int(hierarchy.link_child[j]))
-        link_parent.append(int(hierarchy.link_parent[j]))
-        fraction.append(float(hierarchy.fraction[j]))
-    skeleton = Skeleton(tuple(names), np.array(parents), np.array(offsets), tuple(channels), np.array(end_sites),
-                        sub.positions, sub.up)
-    return SubjointHierarchy(skeleton, new_index[hierarchy.original], np.array(link_child), np.array(link_parent),
-                             np.array(fraction), hierarchy.rigid, hierarchy.groups)
+            name = joints.fresh(f"{hierarchy.skeleton.names[hierarchy.original[child]]}_s0")
+            parent = joints.add(name, parent, np.zeros(3), sub.channels[j], np.full(3, np.nan), child, above, 0.0)
+        new_index[j] = joints.add(sub.names[j], parent, sub.offsets[j], sub.channels[j], sub.end_sites[j], child,
+                                  above, float(hierarchy.fraction[j]))
+    return joints.hierarchy(sub, new_index[hierarchy.original], hierarchy.rigid, hierarchy.groups)
 
 
 def bezier_points(points: np.ndarray, knots: np.ndarray, params: np.ndarray) -> np.ndarray:
