@@ -247,11 +247,13 @@ def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarr
             continue
         owners_of.setdefault(c, []).append(j)
     chains: dict[int, list[int]] = {}
+    kids: list[list[int]] = [[] for _ in range(count)]
     for c in np.flatnonzero(real):
-        below = [int(parent_owner) for parent_owner in owners_of.get(int(c), [])]
-        chain = [int(original[skeleton.parents[c]])] if not below or sub.offsets[below[0]].any() else []
-        chains[int(c)] = chain + below  # with a start joint, its own zero link is not a sub-link
-    kids = [[int(c) for c in skeleton.children(k) if real[c]] for k in range(count)]
+        c = int(c)
+        below = owners_of.get(c, [])
+        head = [int(original[skeleton.parents[c]])] if not below or sub.offsets[below[0]].any() else []
+        chains[c] = head + below  # with a start joint, the head's own zero link is not a sub-link
+        kids[int(skeleton.parents[c])].append(c)  # one pass: children() per joint is quadratic on a star
 
     def peaks(c: int) -> tuple[np.ndarray, list[int]]:
         owners = chains[c]

@@ -121,9 +121,10 @@ def recover_orientations(
     pins: tuple[np.ndarray, np.ndarray] | None = None,
     max_speed: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """World orientations ``(F, J', 4)`` of every sub-joint, and positions with rigid branches placed.
+    """World orientations and positions ``(F, J'', 4)``, ``(F, J'', 3)`` on the rubber skeleton
+    written out, ``link_starts(hierarchy)`` (a start joint on each cut link), rigid branches placed.
 
-    sub_pos : (F, J', 3) float64 sub-joint positions (rigid branches' entries are replaced)
+    sub_pos : (F, J', 3) float64 positions on ``hierarchy`` (rigid branches' entries are replaced)
     hierarchy : the sub-joint hierarchy of ``source.skeleton``
     source : the captured Motion (its local transforms place rigid branches)
     source_rot, source_pos : (F, J, 4) and (F, J, 3) captured world transforms
@@ -299,9 +300,8 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
     for k in range(1, int(cuts.max())):
         on = np.flatnonzero(cuts > k)
         joint = starts[on] + k
-        along = positions[:, joint + 1] - positions[:, joint]
-        along /= np.maximum(np.linalg.norm(along, axis=-1, keepdims=True), 1e-300)
+        # A turn about the sub-link is a turn about the rest direction in the bone's own frame.
         half = 0.5 * angle[:, on] * (k / cuts[on])
-        twist = np.concatenate([along * np.sin(half)[..., None], np.cos(half)[..., None]], axis=-1)
-        out[:, joint] = quat_normalize(quat_mul(twist, out[:, joint]))
+        twist = np.concatenate([direction[on] * np.sin(half)[..., None], np.cos(half)[..., None]], axis=-1)
+        out[:, joint] = quat_normalize(quat_mul(out[:, joint], twist))
     return out
