@@ -278,6 +278,10 @@ def _quiet() -> bool:
 # ---------------------------------------------------------------------------- commands
 
 
+#: Characters of a usage error's message shown before it is cut short.
+_LONGEST_MESSAGE = 300
+
+
 class _Commands(click.Group):
     """click's group, with usage mistakes reported in one line like every other error."""
 
@@ -292,7 +296,10 @@ class _Commands(click.Group):
                 error.show()
                 sys.exit(error.exit_code)
             where = f" (see '{error.ctx.command_path} --help')" if error.ctx is not None else ""
-            click.echo(f"Error: {error.format_message().rstrip('.')}{where}", err=True)
+            message = error.format_message().rstrip(".")
+            if len(message) > _LONGEST_MESSAGE:  # click quotes a bad value whole, however long
+                message = f"{message[:_LONGEST_MESSAGE]}... ({len(message)} characters)"
+            click.echo(f"Error: {message}{where}", err=True)
             sys.exit(error.exit_code)
         except click.ClickException as error:
             if not standalone:

@@ -121,6 +121,13 @@ CASES = {
     "omega inf": lambda t, c, o: (["exaggerate", c, "-o", o, "--omega", "inf"], 2, "omega"),
     "sub-link length 1e-9": lambda t, c, o: (["exaggerate", c, "-o", o, "--sublink-length", "1e-9"], 2, "sublink"),
     "sub-link length 0%": lambda t, c, o: (["exaggerate", c, "-o", o, "--sublink-length", "0%"], 2, "sublink"),
+    "bvh positions unknown": lambda t, c, o: (["exaggerate", c, "-o", o, "--bvh-positions", "sideways"], 2,
+                                             "bvh-positions"),
+    "bvh positions 100,000 characters, quoted short": lambda t, c, o: (
+        ["exaggerate", c, "-o", o, "--bvh-positions", "p" * 100_000], 2, "(100"),
+    "bvh positions in a config": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
+                                                   _bytes(t / "p.toml", b'[output]\nbvh_positions = 7\n')], 2,
+                                                  "output.bvh_positions"),
     "config not UTF-8": lambda t, c, o: (["exaggerate", c, "-o", o, "--config", _bytes(t / "p.toml", b"\xff\xfe[x]")],
                                          2, "UTF-8"),
     "config nested 5000 deep": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
@@ -308,6 +315,7 @@ def test_one_clean_line_and_nothing_lost(tmp_path, case):
     if code:
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("Error: "), done.stderr
+        assert len(lines[0]) < 1000, lines[0][:200]  # a long value is quoted short
         assert words.lower() in lines[0].lower(), lines[0]
         assert (snapshot(out) if out.exists() else None) == out_before, "a refused run wrote into the output folder"
 
