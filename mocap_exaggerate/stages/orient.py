@@ -24,7 +24,6 @@ recovered parent.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
 from ..kinematics import local_from_world
 from ..motion import Motion
@@ -296,6 +295,8 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
     fold = np.sum(pointing * axis, axis=-1) / np.maximum(np.linalg.norm(pointing, axis=-1), 1e-300)
     angle *= (smootherstep((fold - _FOLDED) / (_UNFOLDED - _FOLDED))
               * smootherstep((np.pi - np.abs(angle)) / (np.pi - _TWIST_FADE)))
+    from scipy.ndimage import gaussian_filter1d  # here, so the command line starts without SciPy
+
     angle = gaussian_filter1d(angle, 1.0, axis=0, mode="nearest")  # where the fades pass quickly, over a few frames
     for k in range(1, int(cuts.max())):
         on = np.flatnonzero(cuts > k)
