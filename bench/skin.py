@@ -48,12 +48,14 @@ Figures (h = the clip skeleton's height)
     alone would not do: the default body's capsules have vertices only in their round ends, so the
     middle of a long link is 0.15-0.2 h from the nearest vertex of its own capsule, 0.05 h from its
     surface. ``rest``: the same figure with the skeleton in its rest (bind) pose and the mesh as
-    bound. ``ratio`` = dist / rest. ``/cap``: dist over the captured row's dist (same rig and body).
-    ``grow``: the largest, over points and frames, of a point's distance minus its own rest distance,
-    in h. Read ``ratio`` with care on rigs whose rest pose packs the pieces together (iClone's legs and
-    arms point up beside the spine): at rest every point is near SOME piece (0.027 h), posed it is
-    its own capsule's radius (0.05 h) away, so the captured motion itself reads 1.87 there; ``/cap``
-    compares with the capture instead. The distance figures are taken at every frame (nearest body
+    bound, each point measured against the piece(s) of the mesh that carry it (a piece: a connected
+    part; it carries a point when a vertex of it is weighted to the point's joint or an end of its
+    link; `own_piece_distance`): on rigs whose rest pose packs the pieces together (iClone's legs and
+    arms point up beside the spine) every point is near SOME piece at rest (0.027 h, ``rest_any`` in
+    the JSON), which no posed frame can match, so measured against anything the captured motion itself
+    read 1.87. ``ratio`` = dist / rest. ``/cap``: dist over the captured row's dist (same rig and body).
+    ``grow``: the largest, over points and frames, of a point's distance minus its own rest distance
+    (to anything), in h. ``/cap`` compares with the capture instead. The distance figures are taken at every frame (nearest body
     point by a `scipy.spatial.cKDTree` per frame) unless ``--distance-step K`` asks for every K-th
     frame, in which case the frames of the largest edge ratio and of the most edges past 2x are added.
 
@@ -165,6 +167,40 @@ def nearest(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
     return cKDTree(vertices, balanced_tree=False, compact_nodes=False).query(points)[0]
 
 
+def own_piece_distance(skin, index: np.ndarray, edge_ends: np.ndarray, body_rest: np.ndarray,
+                       rest_points: np.ndarray, parents: np.ndarray, carried: np.ndarray) -> np.ndarray:
+    """Each skeleton point's rest distance to the piece(s) of the body that carry it.
+
+    A piece is a connected part of the mesh; it carries a point when one of its vertices is
+    weighted to the point's joint or to an end of the point's link. On a rig whose rest pose
+    packs the limbs together (iClone's legs and arms point up beside the spine) every point
+    is near SOME piece at rest, so the nearest-anything figure is small there and no posed
+    frame can match it; measured against its own piece, the rest figure is the body's own
+    thickness around its skeleton. ``edge_ends`` (E', 2): the edge of each point along an edge.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges = unique_edges(skin.faces)
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(skin.num_vertices,) * 2)
+    _, piece = connected_components(graph, directed=False)
+    piece_of_point = np.concatenate([piece, piece[edge_ends[:, 0]]])
+    child = np.flatnonzero((parents >= 0) & carried)
+    ends = np.concatenate([np.column_stack([np.flatnonzero(carried), np.maximum(parents[np.flatnonzero(carried)], 0)])]
+                          + [np.column_stack([parents[child], child])] * len(ALONG))
+    touching = np.zeros((piece.max() + 1, len(parents)), bool)
+    rows = np.repeat(piece, skin.joints.shape[1])
+    used = skin.weights.ravel() > 0
+    touching[rows[used], index[skin.joints.ravel()[used]]] = True
+    own = np.full(len(rest_points), np.inf)
+    for p in range(piece.max() + 1):
+        mine = touching[p, ends[:, 0]] | touching[p, ends[:, 1]]
+        if mine.any():
+            own[mine] = np.minimum(own[mine], nearest(body_rest[piece_of_point == p], rest_points[mine]))
+    anywhere = nearest(body_rest, rest_points)
+    return np.where(np.isfinite(own), own, anywhere)
+
+
 def measure_body(skin, skeleton, rotations: np.ndarray, positions: np.ndarray, thickness, height: float,
                  step: int, carried: np.ndarray) -> dict:
     """Every figure of one posed body: ``skin`` bound to ``skeleton`` (its rest = the bind pose),
@@ -192,7 +228,10 @@ def measure_body(skin, skeleton, rotations: np.ndarray, positions: np.ndarray, t
                       format="csr")
     count = skin.num_vertices
     parents = np.asarray(skeleton.parents)
-    rest_distance = nearest(np.concatenate([skin.vertices, between @ skin.vertices]), link_points(rest, parents, carried))
+    body_rest = np.concatenate([skin.vertices, between @ skin.vertices])
+    rest_points = link_points(rest, parents, carried)
+    rest_distance = nearest(body_rest, rest_points)
+    own_distance = own_piece_distance(skin, index, edges[edge], body_rest, rest_points, parents, carried)
 
     per_edge = np.zeros(len(edges))  # largest squared ratio met
     frame_worst = np.zeros(frames)  # per frame, the largest squared ratio
@@ -234,14 +273,14 @@ def measure_body(skin, skeleton, rotations: np.ndarray, positions: np.ndarray, t
             distances[f], grows[f] = d.max(), (d - rest_distance).max()
     worst_frame = int(np.argmax(frame_worst))
     far_frame = int(np.nanargmax(distances))
-    rest_figure = float(rest_distance.max())
+    rest_figure = float(own_distance.max())
     return {
         "vertices": int(skin.num_vertices), "edges": int(len(edges)), "edge_points": int(len(edge)),
         "over_1_5": float(np.mean(per_edge > 2.25)), "over_2": float(np.mean(per_edge > 4.0)),
         "worst_ratio": float(np.sqrt(frame_worst.max())), "worst_frame": worst_frame,
         "most_over_2_frame": int(np.argmax(frame_over2)), "most_over_2": int(frame_over2.max()),
         "dist": float(distances[far_frame] / height), "dist_frame": far_frame,
-        "rest": rest_figure / height,
+        "rest": rest_figure / height, "rest_any": float(rest_distance.max() / height),
         "ratio": float(distances[far_frame] / rest_figure) if rest_figure > 0 else float("inf"),
         "grow": float(np.nanmax(grows) / height), "grow_frame": int(np.nanargmax(grows)),
         "distance_frames": int(np.count_nonzero(np.isfinite(distances))),

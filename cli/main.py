@@ -145,6 +145,9 @@ def pipeline_options(func: Callable) -> Callable:
                      help="BVH position channels: standard (each joint's translation, replacing its OFFSET: what "
                           "Blender, bvhio and MotionBuilder read) or input (the input's own convention: added to "
                           "the OFFSETs for iClone and MakeHuman clips, for re-import into iClone). Default standard."),
+        click.option("--preserve-volume/--no-preserve-volume", "preserve_volume", default=None,
+                     help="GLB: a stretched bone gets thinner and a squashed one fatter, keeping its volume "
+                          "(1/sqrt of the stretch). Default on."),
         click.option("--stretch", "stretches", multiple=True, callback=_parsed_each(parse_stretch), metavar="SPEC",
                      help="Squash/stretch a limb along its path: LIMB:START-END:SCALE[:axes=xz][:pivot=end]"
                           "[:ease_in=0.6,0.2][:ease_out=0.3,0.8][:blend=1][:release=0.1s]; frames or 1.2s. "
@@ -218,6 +221,7 @@ def _overrides(p: dict[str, Any]) -> dict[str, Any]:
         ("springs", "link_stiffness", p["link_stiffness"]), ("springs", "damping", p["damping"]),
         ("springs", "blend", p["blend"]),
         ("output", "skeleton", p["skeleton_mode"]), ("output", "bvh_positions", p["bvh_positions"]),
+        ("output", "preserve_volume", p["preserve_volume"]),
         ("auto_stretch", "enabled", p["auto_stretch_on"]),
         ("contacts", "enabled", None if p["contacts_mode"] is None else p["contacts_mode"] == "auto"),
         ("contacts", "anchor", p["anchor"]), ("contacts", "floor", p["floor_on"]),

@@ -1,42 +1,46 @@
-"""The default character: a body grown from the skeleton itself.
+"""The default character: a rubber figure grown from the skeleton itself.
 
-Each link becomes a capsule (thick enough to read as a limb, thin enough to
-show the skeleton's proportions), kept as its own closed piece and bound
-rigidly to the joint that moves it (a link moves with its head joint). Both
-round ends of a capsule are centred on joints, so wherever a joint turns, the
-capsules meeting there turn about their common centre and the body stays
-joined without any weight blending.
+Like Kwon and Lee's Figure 12 cat, the body is tubes: each run of links that go
+on from one another in the rest pose (shoulder, elbow, wrist and hand; hip,
+knee, ankle and foot; the spine; the neck) is ONE closed tube, round at both
+ends. A ring at a joint lies in the plane halving the bend and is shared half
+and half by the two links' joints, handing over smoothly to each link's own
+joint within two radii of it, so the tube bends at the joint instead of parting
+there; on the rubber skeleton `mocap_exaggerate.skinning.reweight` spreads each
+link's weight over its sub-joints, and the tube follows the link's curve. Rings
+sit half a radius apart, so a bent link is round all along. Where a run branches
+(hips, chest) each child run starts with a round end buried in its parent's,
+moved by the branch joint; runs meeting at more than `MAX_BEND` in the rest pose
+(a foot at right angles to its shin, an arm hanging from a level collar) are
+separate tubes, each round at the joint they share. A link shorter than its
+tube is thick (a Daz buttock, an iClone waist) is folded into its neighbour.
+Thinner where stretched: the GLB scales each joint by
+`mocap_exaggerate.outputs.output_thickness` (volume kept), and so does the preview.
 
-Why not one welded mesh. The body used to be the boolean union of all the
-capsules, each vertex weighted to its four nearest links. On rigs whose rest
-pose packs the limbs together (iClone's ``CC_Base_*`` rest pose has both legs
-and both arms pointing up beside the spine; the 3ds Max and MocapBank clips
-rest with the arms down against the hips) the union welded arms, torso and
-legs into one block, and linear blend skinning tore the welds into shards as
-soon as the limbs moved apart: 43 % of the faces of the iClone clips
-stretched more than threefold in the captured motion itself (6 % on 3ds Max,
-3 % on MocapBank), and legs side by side pulled webs out of each other
-through shared weights. Measured alternatives on ``../shared/data/bvh``:
-a union per limb (arms, legs, torso) with weights kept inside the limb still
-welds iClone's clavicles into its neck (7 % of faces over 3x); a union per
-unbranched chain has no weld left, but blending weights across a joint folds
-the skin into itself where a clip turns a joint far from its rest pose (2-6 %
-of the faces on the packed rigs get an edge squashed below a third; iClone's
-hips turn half a turn in every frame). Separate rigid capsules cannot weld,
-tear or fold whatever the rest pose and the motion: in the captured motion no
-edge changes length, and on the rubber skeleton, where
-`mocap_exaggerate.skinning.reweight` bends each capsule along its link's
-curve, at most 0.6 % of the faces of any shared clip stretch more than
-threefold (31-33 % on iClone before).
+Why not separate capsules, one per link (the body before): a capsule's round
+ends overlapped its neighbours', and on the rubber skeleton the overlapping caps
+were bent by both links (0.3 % of the edges past 2x with no exaggeration at all),
+and the body read as beads on a string. Why not one welded mesh (the body before
+that): the boolean union of every capsule, weighted to the four nearest links,
+welded limbs packed together in the rest pose (iClone's ``CC_Base_*`` rest has
+the legs and arms pointing up beside the spine; 3ds Max and MocapBank rest with
+the arms against the hips) and tore the welds apart as they moved (43 % of the
+iClone faces stretched threefold in the captured motion). Tubes per run never
+join two limbs: a tube holds one run, and runs meet only at a branch.
 
-So that the body reads as a body, the torso (links from the root up to the
-neck base) is thicker than a limb and ends at the neck base, the head is a
-ball around the head's link, and a joint whose own children all ride rigidly
-on it (a hand with fingers, a foot with toes, a head with a face rig) gets
-one capsule reaching to the middle of what rides on it instead of one per
-finger, toe or eye. Twist and share bones ride rigidly, so they add nothing.
-Capsules are tessellated directly (no boolean operation): a humanoid body is
-2.7k-3.4k vertices and costs a few milliseconds.
+Measured on the 33 shared rigs (``bench/skin.py``): in the captured motion no
+face of the tubes passes 2.4x its rest size and at most 0.13 % pass 2x (linear
+blend skinning at joints bent far from the rest pose); every joint and link of
+the rubber skeleton stays within 0.86-1.13x its rest distance of the body at
+every frame at looney, with ``--auto-stretch`` too.
+
+So that the body reads as a body, the torso (links from the root up to the neck
+base) is thicker than a limb, the head is a ball around the head's link, and a
+joint whose own children all ride rigidly on it (a hand with fingers, a foot
+with toes, a head with a face rig) gets one piece reaching to the middle of
+what rides on it instead of one per finger, toe or eye. Twist and share bones
+ride rigidly, so they add nothing. Tubes are tessellated directly (no boolean
+operation): a humanoid body is 3.5k-4.6k vertices and costs about 10 ms.
 """
 
 from __future__ import annotations
@@ -128,6 +132,7 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
         start[head] = end[head] = 0.5 * (start[head] + end[head])
     if not len(mover):  # a skeleton with no link at all: a ball on the root
         mover, start, end, radius = np.zeros(1, np.int64), rest[:1], rest[:1], np.array([LIMB_RADIUS[2] * height])
+        child = np.full(1, -1)
 
     # Pieces that coincide and move together (MocapBank's collars start and end where its neck
     # does) are drawn once, the thickest.
@@ -135,16 +140,210 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     key = np.column_stack([mover[by_size], np.round(np.hstack([start, end])[by_size] / short)])
     _, first = np.unique(key, axis=0, return_index=True)
     pick = np.sort(by_size[first])
-    mover, start, end, radius = mover[pick], start[pick], end[pick], radius[pick]
+    mover, start, end, radius, child = mover[pick], start[pick], end[pick], radius[pick], child[pick]
 
-    # Beyond DETAILED pieces (a root with hundreds of children: not a character) they are
-    # tessellated coarser, so the body stays bounded in size.
-    detail = min(1.0, np.sqrt(DETAILED / len(mover)))
-    vertices, faces, owner = _capsules(start, end, radius, max(6, int(_AROUND * detail)), max(2, int(_RINGS * detail)))
+    # Pieces that run on from one another (a thigh into a shin, a forearm into its hand) are
+    # drawn as one tube; beyond DETAILED tubes (a root with hundreds of children: not a
+    # character) they are tessellated coarser, so the body stays bounded in size.
+    chains = _chains(mover, start, end, child, short)
+    detail = min(1.0, np.sqrt(DETAILED / max(len(chains), 1)))
+    around = max(6, int(_AROUND * detail))
+    rings = max(2, int(_RINGS * detail))
+    steps = _STEPS if detail == 1.0 else 1  # a coarse body: no rings between a piece's ends
+    parts = [_tube(start[c[0]], end[c], radius[c], mover[c], around, rings, short, steps) for c in chains]
+    vertices = np.concatenate([v for v, _, _ in parts])
+    first = np.cumsum([0] + [len(v) for v, _, _ in parts[:-1]])
+    faces = np.concatenate([f + at for (_, f, _), at in zip(parts, first)])
+    influence = np.concatenate([w for _, _, w in parts])
     joints = np.zeros((len(vertices), 4), dtype=np.int64)
     weights = np.zeros((len(vertices), 4))
-    joints[:, 0], weights[:, 0] = mover[owner], 1.0
-    return Skin(vertices, faces, skeleton.names, joints, weights)
+    joints[:, :2] = influence[:, :2].astype(np.int64)
+    weights[:, :2] = influence[:, 2:]
+    weights[:, 1] = np.where(joints[:, 1] == joints[:, 0], 0.0, weights[:, 1])
+    weights[:, 0] = 1.0 - weights[:, 1]
+    joints[:, 1] = np.where(weights[:, 1] > 0, joints[:, 1], 0)
+    return Skin(vertices, faces.astype(np.int64), skeleton.names, joints, weights)
+
+
+def _chains(mover: np.ndarray, start: np.ndarray, end: np.ndarray, child: np.ndarray, short: float) -> list[list[int]]:
+    """Pieces grouped into runs that go on from one another, each run in order from its base.
+
+    Piece ``b`` goes on from piece ``a`` when ``a`` ends at the joint ``b`` starts from, no other
+    piece starts there (not a branch: hips, chest), neither is a ball, and they meet at less
+    than `MAX_BEND` (a foot at right angles to its shin is its own piece, rounded at both ends).
+    """
+    count = len(mover)
+    length = np.linalg.norm(end - start, axis=1)
+    starting = np.bincount(mover, minlength=int(max(mover.max(), child.max()) + 1) if count else 1)
+    successor = np.full(count, -1)
+    by_mover = {int(m): i for i, m in enumerate(mover)}
+    for a in range(count):
+        c = int(child[a])
+        if c < 0 or starting[c] != 1 or length[a] <= short or np.linalg.norm(end[a] - start[by_mover.get(c, a)]) > short:
+            continue
+        b = by_mover[c]
+        if length[b] <= short:
+            continue
+        cosine = np.dot(end[a] - start[a], end[b] - start[b]) / (length[a] * length[b])
+        if cosine > np.cos(np.radians(MAX_BEND)):
+            successor[a] = b
+    has_predecessor = np.zeros(count, bool)
+    has_predecessor[successor[successor >= 0]] = True
+    chains = []
+    for a in range(count):
+        if has_predecessor[a]:
+            continue
+        chain = [a]
+        while successor[chain[-1]] >= 0:
+            chain.append(int(successor[chain[-1]]))
+        chains.append(chain)
+    return chains
+
+
+def _tube(base: np.ndarray, ends: np.ndarray, radius: np.ndarray, movers: np.ndarray, around: int, rings: int,
+          short: float, most_steps: int = 24):
+    """One closed, outward-facing tube from ``base`` through the points ``ends`` (n, 3), round at both ends.
+
+    Piece i runs from the point before to ``ends[i]`` with ``radius[i]`` and moves with ``movers[i]``;
+    a ball where the tube has no length. Along a piece the radius eases to the thinner of two
+    meeting pieces at their joint; the ring at a joint lies in the plane halving the bend
+    (stretched across it so the tube's section stays round) and is shared half and half by the
+    two pieces' joints, handing over smoothly to each piece's own joint within a radius, so the
+    tube bends there instead of parting. Rings are carried along the
+    tube by a rotation-minimising frame, so it does not twist.
+    Returns vertices (V, 3), faces (T, 3) and (V, 4) influences: two joints and their two weights.
+    """
+    points = np.vstack([base, ends])
+    # A piece shorter than the tube is thick (a Daz buttock, an iClone waist) is folded into
+    # its neighbour: rings a hair apart with different joints would stretch tenfold at a turn.
+    length = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    # The last piece (a hand, a foot) keeps its own joint unless it is a mere stub.
+    while len(length) > 1 and np.min(length / radius / np.r_[np.ones(len(length) - 1), 0.25]) < 1.0:
+        i = int(np.argmin(length / radius / np.r_[np.ones(len(length) - 1), 0.25]))
+        # The point between it and the next piece (the last piece: the previous), which takes it over.
+        points = np.delete(points, i + 1 if i + 1 < len(length) else i, axis=0)
+        radius, movers = np.delete(radius, i), np.delete(movers, i)
+        length = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    n = len(points) - 1
+    if n == 1 and np.linalg.norm(points[1] - points[0]) <= short:
+        vertices, faces, _ = _capsules(points[:1], points[1:], radius, around, rings)
+        influence = np.zeros((len(vertices), 4))
+        influence[:, 0] = influence[:, 1] = movers[0]
+        influence[:, 2] = 1.0
+        return vertices, faces, influence
+    direction = np.diff(points, axis=0)
+    length = np.linalg.norm(direction, axis=1)
+    direction = direction / length[:, None]
+    node_radius = np.concatenate([radius[:1], np.minimum(radius[:-1], radius[1:]), radius[-1:]])
+
+    # Rings along the tube: (centre, tangent, radius, stretch across the bend, joint a, joint b, weight of b).
+    centres, tangents, radii, mitre, owner_a, owner_b, share = [], [], [], [], [], [], []
+    # The round start: rings from the pole to the base's equator.
+    polar = 0.5 * np.pi * np.arange(1, rings + 1) / rings
+    for angle in polar[:-1]:
+        centres.append(points[0] - np.cos(angle) * node_radius[0] * direction[0])
+        tangents.append(direction[0])
+        radii.append(np.sin(angle) * node_radius[0])
+        mitre.append(None)
+        owner_a.append(movers[0]), owner_b.append(movers[0]), share.append(0.0)
+    # Across a joint the two pieces' joints hand over smoothly, from half and half at the joint
+    # to all of a piece's own within a radius of it (half a piece at most).
+    zone = np.minimum(_HAND_OVER * node_radius, 0.5 * np.minimum(np.concatenate([length[:1], length]),
+                                                    np.concatenate([length, length[-1:]])))
+    # Rings this near a bent joint would cross its mitred ring on the inside of the bend.
+    bend = np.concatenate([[0.0], np.arccos(np.clip(np.sum(direction[:-1] * direction[1:], axis=1), -1, 1)), [0.0]])
+    clear = node_radius * (1.25 * np.tan(0.5 * bend) + np.where(bend > 0.05, 0.25, 0.0))
+    for i in range(n):
+        # The piece's own rings, half a radius apart: the sub-joints bend it smoothly.
+        steps = int(np.clip(np.ceil(length[i] / max(0.5 * radius[i], 1e-12)), 1, most_steps))
+        for t in np.arange(0 if i == 0 else 1, steps) / steps:
+            if (i > 0 and t * length[i] < clear[i]) or (1.0 - t) * length[i] < clear[i + 1]:
+                continue
+            ease_in = _smooth(1.0 - t / _EASE)
+            ease_out = _smooth(1.0 - (1.0 - t) / _EASE)
+            r = radius[i] + (node_radius[i] - radius[i]) * ease_in + (node_radius[i + 1] - radius[i]) * ease_out
+            centres.append(points[i] + t * length[i] * direction[i])
+            tangents.append(direction[i])
+            radii.append(r)
+            mitre.append(None)
+            other, part = movers[i], 0.0
+            if i > 0 and t * length[i] < zone[i]:
+                other, part = movers[i - 1], 0.5 * (1.0 - _smooth(t * length[i] / zone[i]))
+            elif i + 1 < n and (1.0 - t) * length[i] < zone[i + 1]:
+                other, part = movers[i + 1], 0.5 * (1.0 - _smooth((1.0 - t) * length[i] / zone[i + 1]))
+            owner_a.append(movers[i]), owner_b.append(other), share.append(part)
+        if i + 1 < n:  # the joint to the next piece: a mitred ring shared by both pieces' joints
+            halfway = direction[i] + direction[i + 1]
+            halfway /= np.linalg.norm(halfway)
+            centres.append(points[i + 1])
+            tangents.append(halfway)
+            radii.append(node_radius[i + 1])
+            across = direction[i + 1] - direction[i]
+            size = np.linalg.norm(across)
+            mitre.append(None if size < 1e-9 else (across / size, 1.0 / np.dot(halfway, direction[i]) - 1.0))
+            owner_a.append(movers[i]), owner_b.append(movers[i + 1]), share.append(0.5)
+    centres.append(points[-1])  # the end's equator, then rings to its pole
+    tangents.append(direction[-1])
+    radii.append(node_radius[-1])
+    mitre.append(None)
+    owner_a.append(movers[-1]), owner_b.append(movers[-1]), share.append(0.0)
+    for angle in polar[::-1][1:]:
+        centres.append(points[-1] + np.cos(angle) * node_radius[-1] * direction[-1])
+        tangents.append(direction[-1])
+        radii.append(np.sin(angle) * node_radius[-1])
+        mitre.append(None)
+        owner_a.append(movers[-1]), owner_b.append(movers[-1]), share.append(0.0)
+
+    # Rotation-minimising frames: the first ring's spoke carried from tangent to tangent.
+    tangents = np.array(tangents)
+    w = tangents[0]
+    u = np.cross(w, [1.0, 0.0, 0.0] if abs(w[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    phi = 2.0 * np.pi * np.arange(around) / around
+    ring_points = []
+    for k, w in enumerate(tangents):
+        u = u - np.dot(u, w) * w
+        u /= np.linalg.norm(u)
+        v = np.cross(w, u)
+        spoke = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v  # u x v = w: anticlockwise about w
+        if mitre[k] is not None:
+            bend, extra = mitre[k]
+            spoke = spoke + extra * (spoke @ bend)[:, None] * bend
+        ring_points.append(centres[k] + radii[k] * spoke)
+    count = len(ring_points)
+    vertices = np.concatenate([[points[0] - node_radius[0] * direction[0]], np.concatenate(ring_points),
+                               [points[-1] + node_radius[-1] * direction[-1]]])
+    influence = np.zeros((len(vertices), 4))
+    influence[1:-1, 0] = np.repeat(owner_a, around)
+    influence[1:-1, 1] = np.repeat(owner_b, around)
+    influence[1:-1, 3] = np.repeat(share, around)
+    influence[[0, -1], 0] = influence[[0, -1], 1] = [movers[0], movers[-1]]
+    influence[:, 2] = 1.0 - influence[:, 3]
+    j = np.arange(around)
+    k = (j + 1) % around
+    ring = 1 + np.arange(count)[:, None] * around
+    lower, upper = ring[:-1], ring[1:]
+    faces = np.concatenate([
+        np.column_stack([np.zeros(around, np.int64), ring[0] + k, ring[0] + j]),
+        np.stack([lower + j, lower + k, upper + k], axis=-1).reshape(-1, 3),
+        np.stack([lower + j, upper + k, upper + j], axis=-1).reshape(-1, 3),
+        np.column_stack([ring[-1] + j, ring[-1] + k, np.full(around, len(vertices) - 1)]),
+    ])
+    return vertices, faces, influence
+
+
+def _smooth(x: float) -> float:
+    """0 below 0, 1 above 1, smoothstep between."""
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+#: How far from a joint, in radii, its two pieces hand over (half and half at the joint).
+_HAND_OVER = 2.0
+#: Share of a piece, from each end, over which its radius eases to the joint's.
+_EASE = 0.35
+#: Pieces meeting at a sharper angle than this (degrees, in the rest pose) are separate tubes.
+MAX_BEND = 60.0
 
 
 def _ancestors(parents: np.ndarray, joint: int) -> list[int]:
@@ -212,5 +411,7 @@ def _capsules(start: np.ndarray, end: np.ndarray, radius: np.ndarray, around: in
 #: 130 vertices a capsule; humanoid bodies come out at 2k-4k vertices.
 _AROUND = 16
 _RINGS = 4
-#: Most pieces tessellated in full; more are drawn coarser.
+#: Most rings between the ends of one piece (half a radius apart).
+_STEPS = 24
+#: Most tubes tessellated in full; more are drawn coarser.
 DETAILED = 150

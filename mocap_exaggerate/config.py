@@ -83,10 +83,15 @@ class OutputConfig:
         read), whatever the input used; ``input`` writes them in the input's own
         convention (added to the OFFSETs for an iClone or MakeHuman clip), for
         re-import into iClone.
+    preserve_volume : the GLB keeps a stretched bone's volume: each joint is scaled by
+        ``1 / sqrt(stretch)`` of its bone, so the skin around a link stretched 2x is
+        0.71x as thick and around one squashed to half 1.41x
+        (`mocap_exaggerate.outputs.output_thickness`); off keeps every bone its own thickness.
     """
 
     skeleton: str = "sub"
     bvh_positions: str = "standard"
+    preserve_volume: bool = True
 
     def __post_init__(self) -> None:
         if self.skeleton not in _SKELETON_MODES:

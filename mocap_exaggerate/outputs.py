@@ -87,35 +87,51 @@ def manifest(
 
 
 def output_thickness(result: PipelineResult) -> np.ndarray | None:
-    """World scale ``(F, J_out)`` per output joint for volume preservation, or None without a stretch pass.
+    """World scale ``(F, J_out)`` per output joint that keeps a stretched link's volume, or None where nothing stretches.
 
-    A joint's bone runs to its child: a sub-joint takes the stretch of the link
-    it lies on, an original joint the largest stretch among its outgoing links;
-    thickness is ``1 / sqrt(stretch)``.
+    A link's stretch ``s`` is the distance between its two original joints over
+    their rest distance, measured on the output, so whatever lengthened or
+    shortened it (exaggeration, correction, springs, the stretch pass) counts.
+    Thickness is ``1 / sqrt(s)``, held within `THICKNESS` (volume kept: a link
+    stretched 2x is 0.71x as thick, one squashed to half 1.41x). The sub-joints
+    along a link (its start joint too) take its thickness; an original joint the
+    geometric mean over its outgoing links; a joint with no link of its own (a
+    hand, a head, fingers) keeps 1, so what it carries keeps its size. The
+    chord, not the curve: with nothing exaggerated every link keeps its length
+    exactly, and the result is None (no scale track is written), though the
+    sub-links of a bent link are a little longer than their share of its chord.
     """
-    if result.stretch is None:
-        return None
-    factors = result.stretch.stretch_factors  # (F, J): the link ending at each original joint
+    skeleton = result.motion.skeleton
     hierarchy = result.hierarchy
-    parents = _original_parents(result)
-    outgoing = np.ones_like(factors)
-    np.maximum.at(outgoing.T, parents[1:], factors[:, 1:].T)
-    if hierarchy is not None and result.motion.skeleton is hierarchy.skeleton:
-        between = hierarchy.fraction < 1.0
-        stretch = np.where(between[None, :], factors[:, hierarchy.link_child], outgoing[:, hierarchy.link_child])
+    rubber = hierarchy is not None and skeleton is hierarchy.skeleton
+    if rubber:
+        parents = hierarchy.link_parent[hierarchy.original]
+        positions = result.world_positions[:, hierarchy.original]
+        rest = skeleton.rest_positions()[hierarchy.original]
     else:
-        stretch = outgoing
-    return 1.0 / np.sqrt(np.maximum(stretch, 1e-6))
+        parents = np.asarray(skeleton.parents)
+        positions = result.world_positions
+        rest = skeleton.rest_positions()
+    count = len(parents)
+    length = np.linalg.norm(rest - rest[np.maximum(parents, 0)], axis=1)
+    child = np.flatnonzero((parents >= 0) & (length > 1e-9 * max(skeleton.height(), 1e-12)))
+    log_stretch = np.zeros((len(positions), count))
+    log_stretch[:, child] = np.log(np.maximum(
+        np.linalg.norm(positions[:, child] - positions[:, parents[child]], axis=-1) / length[child], 1e-6))
+    total = np.zeros((len(positions), count))
+    np.add.at(total.T, parents[child], log_stretch[:, child].T)
+    outgoing = total / np.maximum(np.bincount(parents[child], minlength=count), 1)
+    if rubber:
+        along = np.where(hierarchy.is_original[None, :], outgoing[:, hierarchy.link_child], log_stretch[:, hierarchy.link_child])
+    else:
+        along = outgoing
+    thickness = np.clip(np.exp(-0.5 * along), *THICKNESS)
+    thickness[np.abs(thickness - 1.0) <= 1e-6] = 1.0
+    return None if np.all(thickness == 1.0) else thickness
 
 
-def _original_parents(result: PipelineResult) -> np.ndarray:
-    hierarchy = result.hierarchy
-    if hierarchy is not None:
-        parents = np.full(len(hierarchy.original), -1)
-        originals = hierarchy.is_original
-        parents[hierarchy.link_child[originals]] = hierarchy.link_parent[originals]
-        return parents
-    return np.asarray(result.motion.skeleton.parents)
+#: The thinnest and thickest a joint's bone gets by `output_thickness` (stretched 4x, squashed to a quarter).
+THICKNESS = (0.5, 2.0)
 
 
 def base_skin(motion: Motion, result: PipelineResult, skin: Skin | None = None,
@@ -156,20 +172,24 @@ def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: 
 
 
 def make_glb(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
-             influences: int = 4, joint_map: dict[str, str] | None = None) -> tuple[bytes, bytes, str]:
+             influences: int = 4, joint_map: dict[str, str] | None = None, *,
+             preserve_volume: bool = True) -> tuple[bytes, bytes, str]:
     """The skinned GLB of a run, its skin as ``.npz`` bytes, and how the units were decided."""
-    pieces, weights, how = glb_files(motion, result, skin, units, influences, joint_map)
+    pieces, weights, how = glb_files(motion, result, skin, units, influences, joint_map,
+                                     preserve_volume=preserve_volume)
     return b"".join(pieces), weights, how
 
 
 def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
-              influences: int = 4, joint_map: dict[str, str] | None = None) -> tuple[list[bytes], bytes, str]:
+              influences: int = 4, joint_map: dict[str, str] | None = None, *,
+              preserve_volume: bool = True) -> tuple[list[bytes], bytes, str]:
     """As `make_glb`, with the GLB as a list of pieces (no copy of a long clip's animation into one blob).
 
     motion : the captured clip the run started from
     skin : a character (bound to the clip here when it is not yet, `mocap_exaggerate.binding`;
         ``joint_map`` for the pairs the binding misses), or None for the default body grown
         from the skeleton
+    preserve_volume : joints scaled by `output_thickness` (``output.preserve_volume``)
     """
     from .io.gltf import glb_pieces, unit_scale
     from .io.skin import npz_bytes
@@ -182,7 +202,7 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
 
     step = max(motion.num_frames // 64, 1)  # a sample of the clip tells which way is up
     up = standing_up(motion.skeleton, motion.slice(slice(None, None, step)).world_positions())
-    glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=output_thickness(result), up=up)
+    glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=output_thickness(result) if preserve_volume else None, up=up)
     weights = npz_bytes(joint_names=np.array(bound.joint_names), joints=bound.joints, weights=bound.weights,
                         vertices=bound.vertices, faces=bound.faces)
     return glb, weights, how

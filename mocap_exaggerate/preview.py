@@ -25,7 +25,7 @@ import numpy as np
 
 from .errors import ConfigError, check_number
 from .motion import Motion
-from .outputs import base_skin, output_skin
+from .outputs import base_skin, output_skin, output_thickness
 from .pipeline import PipelineResult
 from .rotations import quat_rotate
 from .skeleton import Skeleton
@@ -48,25 +48,30 @@ _TRIANGLE_CODES = np.array([1, 2, 2, 79], dtype=np.uint8)  # a matplotlib Path's
 
 
 def pose_skin(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray,
-              joint_index: np.ndarray) -> np.ndarray:
+              joint_index: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
     """Linear blend skinning: vertices ``(..., V, 3)`` of ``skin`` posed by world transforms.
 
     bind : (J, 3) rest (bind) position of each skeleton joint;
     world_rot : (..., J, 4), world_pos : (..., J, 3), any leading axes (frames) broadcast;
-    joint_index : (len(skin.joint_names),) skeleton index of each skin joint.
+    joint_index : (len(skin.joint_names),) skeleton index of each skin joint;
+    scale : (..., J) world scale of each joint (the GLB's `mocap_exaggerate.outputs.output_thickness`) or None.
     The bind pose has identity orientations (BVH rest), so a vertex moves as
-    ``R_j (v - bind_j) + p_j`` under joint j.
+    ``s_j R_j (v - bind_j) + p_j`` under joint j.
     """
     joints = joint_index[skin.joints]  # (V, K)
-    moved = quat_rotate(world_rot[..., joints, :], skin.vertices[:, None, :] - bind[joints]) + world_pos[..., joints, :]
+    turned = quat_rotate(world_rot[..., joints, :], skin.vertices[:, None, :] - bind[joints])
+    if scale is not None:
+        turned = turned * scale[..., joints, None]
+    moved = turned + world_pos[..., joints, :]
     return np.sum(skin.weights[..., None] * moved, axis=-2)
 
 
 def _pose_frames(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray,
-                 joint_index: np.ndarray, chunk: int = 32) -> np.ndarray:
+                 joint_index: np.ndarray, chunk: int = 32, scale: np.ndarray | None = None) -> np.ndarray:
     """`pose_skin` over frames ``(F, J, ...)`` -> ``(F, V, 3)``, a chunk of frames at a time: the
     ``(F, V, K, 3)`` intermediates of a long animation would otherwise take hundreds of MB."""
-    posed = [pose_skin(skin, bind, world_rot[i:i + chunk], world_pos[i:i + chunk], joint_index)
+    posed = [pose_skin(skin, bind, world_rot[i:i + chunk], world_pos[i:i + chunk], joint_index,
+                       None if scale is None else scale[i:i + chunk])
              for i in range(0, len(world_rot), chunk)]
     return np.concatenate(posed) if posed else np.zeros((0, len(skin.vertices), 3))
 
@@ -108,12 +113,14 @@ def _view_axes(skeleton: Skeleton, root_path: np.ndarray) -> tuple[int, int, int
     return right, up, depth
 
 
-def pose_bodies(motion: Motion, result: PipelineResult, frames: np.ndarray, skin: Skin | None = None) -> PosedBodies:
+def pose_bodies(motion: Motion, result: PipelineResult, frames: np.ndarray, skin: Skin | None = None, *,
+                preserve_volume: bool = True) -> PosedBodies:
     """Pose both bodies at the output ``frames`` (ints into ``result``), all frames at once.
 
     The captured body stands on the clip's skeleton lined up frame for frame with the output
     (`lined_up`); the exaggerated one is the same body (``skin`` bound to the clip, else the
-    default body) re-weighted onto the output skeleton.
+    default body) re-weighted onto the output skeleton, as the GLB poses it (thinner where
+    stretched unless ``preserve_volume`` is off).
     """
     skeleton = motion.skeleton
     body = base_skin(motion, result, skin)
@@ -126,8 +133,10 @@ def pose_bodies(motion: Motion, result: PipelineResult, frames: np.ndarray, skin
     index_in = np.array([skeleton.index(n) for n in body.joint_names], dtype=np.int64)
     index_out = np.array([out_skeleton.index(n) for n in rubber.joint_names], dtype=np.int64)
     captured = _pose_frames(body, skeleton.rest_positions(), captured_rot[frames], captured_pos[frames], index_in)
+    thickness = output_thickness(result) if preserve_volume else None
     exaggerated = _pose_frames(rubber, out_skeleton.rest_positions(), result.world_rotations[frames],
-                               result.world_positions[frames], index_out)
+                               result.world_positions[frames], index_out,
+                               scale=None if thickness is None else thickness[frames])
     return PosedBodies(frames, captured, body.faces, exaggerated, rubber.faces, captured_pos[frames, 0],
                        _view_axes(skeleton, captured_pos[:, 0]))
 

@@ -218,18 +218,20 @@ def test_a_forearm_made_shorter_is_stretched_back_along_itself(sample_clip):
     squeeze = np.eye(3) + (1 / 1.5 - 1.0) * np.outer(axis, axis)
     shift = (1 / 1.5 - 1.0) * (rest[hand] - rest[fore])
     below = set(skeleton.descendants(hand).tolist())
-    owner = np.array([skeleton.index(body.joint_names[j]) for j in body.joints[:, 0]])
-    vertices = body.vertices.copy()
-    on_fore = owner == fore
-    vertices[on_fore] = rest[fore] + (vertices[on_fore] - rest[fore]) @ squeeze.T
-    riding = np.isin(owner, list(below))
-    vertices[riding] += shift
+    # Each vertex moved by its joints' moves, blended by its weights (the tubes bend at the wrist).
+    owner = np.array([skeleton.index(n) for n in body.joint_names])[body.joints]  # (V, 4)
+    squeezed = rest[fore] + (body.vertices - rest[fore]) @ squeeze.T
+    moved = np.where((owner == fore)[..., None], squeezed[:, None], body.vertices[:, None])
+    moved = moved + np.isin(owner, list(below))[..., None] * shift
+    vertices = np.sum(body.weights[..., None] * moved, axis=1)
     bind = {n: rest[j] + (shift if j in below else 0.0) for j, n in enumerate(skeleton.names)}
     parents = {n: skeleton.names[skeleton.parents[j]] for j, n in enumerate(skeleton.names) if j > 0}
     other = Skin(vertices, body.faces, body.joint_names, body.joints, body.weights, bind, parents)
     bound, binding = bind_skin(other, skeleton)
     assert binding.scale == pytest.approx(1.0, abs=1e-9)
-    np.testing.assert_allclose(bound.vertices, body.vertices, atol=1e-6 * skeleton.height())
+    single = body.weights.max(axis=1) == 1.0  # exact where one joint holds a vertex
+    np.testing.assert_allclose(bound.vertices[single], body.vertices[single], atol=1e-6 * skeleton.height())
+    np.testing.assert_allclose(bound.vertices, body.vertices, atol=0.01 * skeleton.height())
 
 
 @needs_makehuman

@@ -1,5 +1,5 @@
-"""The default body on real rigs: closed pieces that never weld limbs together, and a posed mesh
-that stays whole over the captured and the exaggerated motion."""
+"""The default body on real rigs: one closed tube per run of links, never welding limbs
+together, that stays joined to its skeleton over the captured and the exaggerated motion."""
 
 from __future__ import annotations
 
@@ -41,18 +41,37 @@ def pieces(skin) -> list[np.ndarray]:
 
 
 @pytest.mark.parametrize("path", SAMPLE_CLIPS, ids=lambda p: p.stem)
-def test_every_piece_is_closed_outward_and_moves_with_one_joint(path):
-    _, body = body_of(path)
+def test_every_piece_is_a_closed_outward_tube_of_consecutive_links(path):
+    motion, body = body_of(path)
+    parents = motion.skeleton.parents
     assert body.joints.shape == body.weights.shape == (body.num_vertices, 4)
     np.testing.assert_allclose(body.weights.sum(axis=1), 1.0)
+    assert np.all(body.weights[:, 2:] == 0)  # two joints at most: the two ends of a bend
     for piece in pieces(body):
         inside = np.isin(body.faces, piece).all(axis=1)
         mesh = trimesh.Trimesh(body.vertices, body.faces[inside], process=False)
         assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
-        assert len(np.unique(body.joints[piece, 0])) == 1  # a rigid piece: nothing to tear
-    assert np.all(body.weights[:, 1:] == 0)
+        # The joints that move a tube run down one chain: each but the first is its predecessor's child.
+        moving = np.unique(body.joints[piece][body.weights[piece] > 0])
+        assert sum(parents[j] not in moving for j in moving) == 1, [motion.skeleton.names[j] for j in moving]
 
 
+@pytest.mark.parametrize("path", SAMPLE_CLIPS, ids=lambda p: p.stem)
+def test_arms_and_legs_are_one_tube_each_from_shoulder_and_hip(path):
+    """Kwon and Lee's cat is one rubber figure: the links of an arm or a leg that run on from one
+    another in the rest pose are one tube, so they cannot part at an elbow or a knee."""
+    motion, body = body_of(path)
+    skeleton = motion.skeleton
+    limbs = find_limbs(skeleton)
+    piece_of = np.zeros(body.num_vertices, np.int64)
+    for number, piece in enumerate(pieces(body)):
+        piece_of[piece] = number
+    for name in ("left_arm", "right_arm", "left_leg", "right_leg"):
+        limb = limbs[name]
+        # Upper limb, its joint (elbow, knee) and lower limb: the links moved by these two joints.
+        upper, lower = limb.joints[-3], limb.joints[-2]
+        carried = [np.unique(piece_of[(body.joints == j).any(axis=1) & (body.weights.max(axis=1) > 0)]) for j in (upper, lower)]
+        assert len(set(carried[0]) | set(carried[1])) == 1, (name, carried)
 @pytest.mark.parametrize("path", SAMPLE_CLIPS, ids=lambda p: p.stem)
 def test_the_default_rigid_set_is_the_pipelines(path):
     """Called without ``rigid`` (a --skin made from it), twist bones and fingers add nothing either."""
@@ -76,13 +95,16 @@ def test_no_piece_joins_an_arm_to_the_torso_or_a_leg(name):
     limbs = find_limbs(skeleton)
     sides = {limb: set(skeleton.descendants(limbs[limb].base).tolist()) for limb in ("left_arm", "right_arm",
                                                                                    "left_leg", "right_leg")}
+    sides["spine"] = set(limbs["spine"].joints)
     for piece in pieces(body):
         joints = set(body.joints[piece][body.weights[piece] > 0].tolist())
-        for limb, members in sides.items():
-            assert joints <= members or not joints & members, (limb, [skeleton.names[j] for j in joints])
-    # Every link of each arm and leg has its own piece.
-    moved = set(body.joints[:, 0].tolist())
-    for limb in sides:
+        # A tube starting at a branch (a collar from the chest) moves its first link with the branch joint.
+        joints -= {j for j in joints if skeleton.parents[j] not in joints and len(joints) > 1}
+        touched = [limb for limb, members in sides.items() if joints & members]
+        assert len(touched) <= 1, (touched, [skeleton.names[j] for j in joints])
+    # Every link of each arm and leg moves some of the body.
+    moved = set(body.joints[body.weights > 0].tolist())
+    for limb in ("left_arm", "right_arm", "left_leg", "right_leg"):
         assert set(limbs[limb].joints) <= moved, limb
 
 
@@ -92,21 +114,26 @@ def test_iclone_twist_and_share_bones_add_no_bulge_and_hands_feet_head_are_there
     assert not {n for n in names if "ShareBone" in n or ("Twist" in n and "Neck" not in n)}
     # Their fingers, toes and face ride rigidly; the hand, foot and head joints still get a piece.
     assert {"CC_Base_L_Hand", "CC_Base_R_Hand", "CC_Base_L_Foot", "CC_Base_R_Foot", "CC_Base_Head"} <= names
-    # One piece per moving joint's link or end (no finger, toe, eye, twist piece): 25 pieces.
-    assert len(pieces(body)) == 25
+    # One tube per run of links (no finger, toe, eye, twist piece): each leg from the pelvis side to
+    # the toes, each arm from the chest through collar, arm and hand, the spine, the neck, the
+    # head's ball, and the two pelvis sides and the upper chest, which turn off at sharp angles.
+    assert len(pieces(body)) == 10
 
 
 @pytest.mark.parametrize("path", shared_clip_params())
-def test_captured_motion_moves_every_face_rigidly(path):
-    """Each piece moves with one joint, so no edge of the posed mesh changes length over the whole
-    captured clip (the welded body stretched 43 % of the iClone faces more than 3x)."""
+def test_captured_motion_bends_the_tubes_without_tearing_them(path):
+    """The tubes bend at the joints by linear blend skinning, handing over within a radius of
+    each joint (within two radii): over the captured clip no face passes 2.5x its rest size
+    and at most 0.2 % pass 2x (the worst shared clips: 0.13 % on the 3ds Max walk, 0.09 % on
+    the iClone cartwheel; the rest none)."""
     motion, body = body_of(path)
     skeleton = motion.skeleton
     rotations, positions = motion.forward_kinematics()
     index = np.array([skeleton.index(n) for n in body.joint_names])
     frames = np.unique(np.linspace(0, motion.num_frames - 1, min(motion.num_frames, 150)).astype(int))
     stretch = edge_stretch(body, skeleton.rest_positions(), rotations, positions, index, frames)
-    assert stretch.max() < 1 + 1e-6
+    assert stretch.max() < 2.5
+    assert np.mean(stretch > 2.0) < 0.002
 
 
 @pytest.mark.parametrize("name", PACKED)

@@ -18,7 +18,7 @@ from mocap_exaggerate.io.gltf import unit_scale
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.config import load_preset, resolve_config
 from mocap_exaggerate.io.skin import load_skin
-from mocap_exaggerate.outputs import make_glb
+from mocap_exaggerate.outputs import make_glb, output_thickness
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.skinning import Skin
 from mocap_exaggerate.rotations import quat_mul, quat_rotate
@@ -80,7 +80,17 @@ def test_read_back_counts_weights_and_the_mesh_follows_the_skeleton(clip):
     motion, result, glb, weights_npz = glb_for(path)
     gltf = pygltflib.GLTF2.load_from_bytes(glb)
     assert len(gltf.skins[0].joints) == result.motion.skeleton.num_joints
-    assert len(gltf.animations[0].channels) == 2 * result.motion.skeleton.num_joints
+    # A translation and a rotation track per joint, and a scale track on each joint whose world
+    # scale (output_thickness: its bone stretches or squashes, keeping volume) differs from its
+    # parent's at some frame.
+    thickness = output_thickness(result)
+    parents = result.motion.skeleton.parents
+    relative = thickness / np.where(parents >= 0, thickness[:, np.maximum(parents, 0)], 1.0)
+    scaled = np.any(np.abs(relative - 1.0) > 1e-6, axis=0)
+    assert 0 < scaled.sum() < result.motion.skeleton.num_joints
+    assert len(gltf.animations[0].channels) == 2 * result.motion.skeleton.num_joints + scaled.sum()
+    tracks = {(c.target.node, c.target.path) for c in gltf.animations[0].channels}
+    assert {node for node, path in tracks if path == "scale"} == set(np.flatnonzero(scaled))
     stored = np.load(io.BytesIO(weights_npz))
     height = motion.skeleton.height()
     assert list(stored["joint_names"]) == list(result.motion.skeleton.names)
