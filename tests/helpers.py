@@ -109,9 +109,16 @@ def skinned_vertices(glb: bytes, frame: int, result, meters: float):
     joints = read(primitive.attributes.JOINTS_0, np.uint8 if small else np.uint16, 4).astype(np.int64)
     weights = read(primitive.attributes.WEIGHTS_0, np.float32, 4).astype(np.float64)
     ibm = read(gltf.skins[0].inverseBindMatrices, np.float32, 16).reshape(-1, 4, 4).transpose(0, 2, 1)
-    # Bind matrices are pure translations: v' = sum_j w_j (R_j (v + t_j) + p_j).
+    # Bind matrices are pure translations: v' = sum_j w_j (s_j R_j (v + t_j) + p_j), with s_j the
+    # joint's world scale where the GLB keeps a stretched link's volume (output_thickness).
+    from mocap_exaggerate.outputs import output_thickness
+
     local = positions[:, None, :] + ibm[joints, :3, 3]
-    moved = quat_rotate(result.world_rotations[frame][joints], local) + result.world_positions[frame][joints] * meters
+    turned = quat_rotate(result.world_rotations[frame][joints], local)
+    thickness = output_thickness(result) if any(c.target.path == "scale" for c in gltf.animations[0].channels) else None
+    if thickness is not None:
+        turned = turned * thickness[frame][joints][..., None]
+    moved = turned + result.world_positions[frame][joints] * meters
     return np.sum(weights[..., None] * moved, axis=1), weights
 
 
