@@ -16,7 +16,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from .errors import ConfigError, check_number
+from .errors import ConfigError, check_flag, check_number
 from .io.bvh import BVH_POSITIONS, FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES
 from .stages.contacts import ContactConfig, TargetSpec
 from .stages.correct import CorrectConfig
@@ -99,6 +99,7 @@ class OutputConfig:
         if self.bvh_positions not in BVH_POSITIONS:
             raise ConfigError(f"output.bvh_positions must be one of {', '.join(BVH_POSITIONS)}, "
                               f"got {self.bvh_positions!r:.60}")
+        check_flag("output.preserve_volume", self.preserve_volume)
 
 
 _BLOCKS = {

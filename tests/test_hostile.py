@@ -128,6 +128,11 @@ CASES = {
     "bvh positions in a config": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
                                                    _bytes(t / "p.toml", b'[output]\nbvh_positions = 7\n')], 2,
                                                   "output.bvh_positions"),
+    "preserve volume not a flag in a config": lambda t, c, o: (
+        ["exaggerate", c, "-o", o, "--config", _bytes(t / "p.toml", b'[output]\npreserve_volume = "yes"\n')], 2,
+        "output.preserve_volume"),
+    "preserve volume given a value": lambda t, c, o: (["exaggerate", c, "-o", o, "--preserve-volume=maybe"], 2,
+                                                      "preserve-volume"),
     "config not UTF-8": lambda t, c, o: (["exaggerate", c, "-o", o, "--config", _bytes(t / "p.toml", b"\xff\xfe[x]")],
                                          2, "UTF-8"),
     "config nested 5000 deep": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
