@@ -179,10 +179,10 @@ def _chains(mover: np.ndarray, start: np.ndarray, end: np.ndarray, child: np.nda
     by_mover = {int(m): i for i, m in enumerate(mover)}
     for a in range(count):
         c = int(child[a])
-        if c < 0 or starting[c] != 1 or length[a] <= short or np.linalg.norm(end[a] - start[by_mover.get(c, a)]) > short:
+        if c < 0 or starting[c] != 1 or length[a] <= short:
             continue
         b = by_mover[c]
-        if length[b] <= short:
+        if length[b] <= short or np.linalg.norm(end[a] - start[b]) > short:  # a ball, or a torso top cut short
             continue
         cosine = np.dot(end[a] - start[a], end[b] - start[b]) / (length[a] * length[b])
         if cosine > np.cos(np.radians(MAX_BEND)):

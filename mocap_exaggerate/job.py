@@ -290,8 +290,7 @@ def convert(
         if glb and not to_stream:
             from .outputs import glb_files
 
-            building = pool.submit(_timed, glb_files, motion, result, skin, units, influences,
-                                   preserve_volume=config.output.preserve_volume)
+            building = pool.submit(_timed, glb_files, motion, result, skin, units, influences)
         else:
             building = None
         tick = time.perf_counter()
@@ -381,9 +380,9 @@ def check_output_set(manifest: str | os.PathLike) -> list[str]:
     return problems
 
 
-def _timed(func, *args, **kwargs):
+def _timed(func, *args):
     tick = time.perf_counter()
-    return func(*args, **kwargs), time.perf_counter() - tick
+    return func(*args), time.perf_counter() - tick
 
 
 def describe(source: Source, *, fps: float | None = None, limbs: bool = False, groups: bool = False,

@@ -87,7 +87,7 @@ def manifest(
 
 
 def output_thickness(result: PipelineResult) -> np.ndarray | None:
-    """World scale ``(F, J_out)`` per output joint that keeps a stretched link's volume, or None where nothing stretches.
+    """World scale ``(F, J_out)`` per output joint keeping a stretched link's volume; None where nothing stretches.
 
     A link's stretch ``s`` is the distance between its two original joints over
     their rest distance, measured on the output, so whatever lengthened or
@@ -100,7 +100,10 @@ def output_thickness(result: PipelineResult) -> np.ndarray | None:
     chord, not the curve: with nothing exaggerated every link keeps its length
     exactly, and the result is None (no scale track is written), though the
     sub-links of a bent link are a little longer than their share of its chord.
+    None too where the run's ``output.preserve_volume`` is off.
     """
+    if not result.preserve_volume:
+        return None
     skeleton = result.motion.skeleton
     hierarchy = result.hierarchy
     rubber = hierarchy is not None and skeleton is hierarchy.skeleton
@@ -122,7 +125,8 @@ def output_thickness(result: PipelineResult) -> np.ndarray | None:
     np.add.at(total.T, parents[child], log_stretch[:, child].T)
     outgoing = total / np.maximum(np.bincount(parents[child], minlength=count), 1)
     if rubber:
-        along = np.where(hierarchy.is_original[None, :], outgoing[:, hierarchy.link_child], log_stretch[:, hierarchy.link_child])
+        link = hierarchy.link_child
+        along = np.where(hierarchy.is_original[None, :], outgoing[:, link], log_stretch[:, link])
     else:
         along = outgoing
     thickness = np.clip(np.exp(-0.5 * along), *THICKNESS)
@@ -172,24 +176,21 @@ def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: 
 
 
 def make_glb(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
-             influences: int = 4, joint_map: dict[str, str] | None = None, *,
-             preserve_volume: bool = True) -> tuple[bytes, bytes, str]:
+             influences: int = 4, joint_map: dict[str, str] | None = None) -> tuple[bytes, bytes, str]:
     """The skinned GLB of a run, its skin as ``.npz`` bytes, and how the units were decided."""
-    pieces, weights, how = glb_files(motion, result, skin, units, influences, joint_map,
-                                     preserve_volume=preserve_volume)
+    pieces, weights, how = glb_files(motion, result, skin, units, influences, joint_map)
     return b"".join(pieces), weights, how
 
 
 def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
-              influences: int = 4, joint_map: dict[str, str] | None = None, *,
-              preserve_volume: bool = True) -> tuple[list[bytes], bytes, str]:
+              influences: int = 4, joint_map: dict[str, str] | None = None) -> tuple[list[bytes], bytes, str]:
     """As `make_glb`, with the GLB as a list of pieces (no copy of a long clip's animation into one blob).
 
     motion : the captured clip the run started from
     skin : a character (bound to the clip here when it is not yet, `mocap_exaggerate.binding`;
         ``joint_map`` for the pairs the binding misses), or None for the default body grown
         from the skeleton
-    preserve_volume : joints scaled by `output_thickness` (``output.preserve_volume``)
+    Joints are scaled by `output_thickness` (kept volume) unless the run's ``output.preserve_volume`` is off.
     """
     from .io.gltf import glb_pieces, unit_scale
     from .io.skin import npz_bytes
@@ -202,7 +203,7 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
 
     step = max(motion.num_frames // 64, 1)  # a sample of the clip tells which way is up
     up = standing_up(motion.skeleton, motion.slice(slice(None, None, step)).world_positions())
-    glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=output_thickness(result) if preserve_volume else None, up=up)
+    glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=output_thickness(result), up=up)
     weights = npz_bytes(joint_names=np.array(bound.joint_names), joints=bound.joints, weights=bound.weights,
                         vertices=bound.vertices, faces=bound.faces)
     return glb, weights, how

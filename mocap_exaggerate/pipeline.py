@@ -406,6 +406,8 @@ class PipelineResult:
     stages : names of the stages that ran, in order
     timings : seconds per step, in run order
     correct_report : CorrectReport or None when correction was off
+    preserve_volume : ``output.preserve_volume``: the skinned outputs (GLB, previews) scale
+        each joint by `mocap_exaggerate.outputs.output_thickness`
     """
 
     motion: Motion
@@ -423,6 +425,7 @@ class PipelineResult:
     stretch: StretchResult | None = None
     stages: list[str] = field(default_factory=list)
     constraints: dict | None = None
+    preserve_volume: bool = True
 
 
 def prepare(motion: Motion, config: InputConfig | None = None, *, limbs: dict | None = None,
@@ -491,6 +494,7 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
         stretch=state.findings.get("stretch"),
         stages=ran,
         constraints=state.findings.get("constraints"),
+        preserve_volume=config.output.preserve_volume,
     )
 
 

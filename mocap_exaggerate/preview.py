@@ -113,14 +113,13 @@ def _view_axes(skeleton: Skeleton, root_path: np.ndarray) -> tuple[int, int, int
     return right, up, depth
 
 
-def pose_bodies(motion: Motion, result: PipelineResult, frames: np.ndarray, skin: Skin | None = None, *,
-                preserve_volume: bool = True) -> PosedBodies:
+def pose_bodies(motion: Motion, result: PipelineResult, frames: np.ndarray, skin: Skin | None = None) -> PosedBodies:
     """Pose both bodies at the output ``frames`` (ints into ``result``), all frames at once.
 
     The captured body stands on the clip's skeleton lined up frame for frame with the output
     (`lined_up`); the exaggerated one is the same body (``skin`` bound to the clip, else the
     default body) re-weighted onto the output skeleton, as the GLB poses it (thinner where
-    stretched unless ``preserve_volume`` is off).
+    stretched unless the run's ``output.preserve_volume`` is off).
     """
     skeleton = motion.skeleton
     body = base_skin(motion, result, skin)
@@ -133,7 +132,7 @@ def pose_bodies(motion: Motion, result: PipelineResult, frames: np.ndarray, skin
     index_in = np.array([skeleton.index(n) for n in body.joint_names], dtype=np.int64)
     index_out = np.array([out_skeleton.index(n) for n in rubber.joint_names], dtype=np.int64)
     captured = _pose_frames(body, skeleton.rest_positions(), captured_rot[frames], captured_pos[frames], index_in)
-    thickness = output_thickness(result) if preserve_volume else None
+    thickness = output_thickness(result)
     exaggerated = _pose_frames(rubber, out_skeleton.rest_positions(), result.world_rotations[frames],
                                result.world_positions[frames], index_out,
                                scale=None if thickness is None else thickness[frames])

@@ -192,7 +192,8 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
         slot = np.clip(np.sum(knots <= along[:, None], axis=1) - 1, 0, knots.shape[1] - 2)
         left = knots[np.arange(len(link)), slot]
         right = knots[np.arange(len(link)), slot + 1]
-        u = np.where(np.isfinite(right) & (right > left), (along - left) / np.where(right > left, right - left, 1.0), 0.0)
+        ahead = np.isfinite(right) & (right > left)
+        u = np.where(ahead, (along - left) / np.where(ahead, right - left, 1.0), 0.0)
         u = np.clip(u, 0.0, 1.0)
         base = (weight[block][entry] * share)
         for owner, part in ((owners[np.arange(len(link)), slot], 1.0 - u), (owners[np.arange(len(link)), slot + 1], u)):

@@ -20,7 +20,7 @@ from mocap_exaggerate.config import PipelineConfig, load_preset
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.outputs import THICKNESS, base_skin, make_glb, output_skin, output_thickness
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.preview import pose_skin
+from mocap_exaggerate.preview import pose_bodies, pose_skin
 from mocap_exaggerate.skeleton import Skeleton
 from mocap_exaggerate.stages.contacts import ContactConfig
 from mocap_exaggerate.stages.correct import CorrectConfig
@@ -42,7 +42,8 @@ def _chain(stretch: np.ndarray) -> SimpleNamespace:
     positions = np.zeros((frames, 3, 3))
     positions[:, 1, 0] = 1.0 * stretch[:, 0]
     positions[:, 2, 0] = positions[:, 1, 0] + 2.0 * stretch[:, 1]
-    return SimpleNamespace(motion=SimpleNamespace(skeleton=skeleton), world_positions=positions, hierarchy=None)
+    return SimpleNamespace(motion=SimpleNamespace(skeleton=skeleton), world_positions=positions, hierarchy=None,
+                           preserve_volume=True)
 
 
 def test_thickness_keeps_each_bones_volume_worked_by_hand():
@@ -58,7 +59,7 @@ def test_thickness_keeps_each_bones_volume_worked_by_hand():
                     tuple(("Xrotation", "Yrotation", "Zrotation") for _ in names), np.full((3, 3), np.nan))
     positions = np.array([[[0.0, 0, 0], [4, 0, 0], [0, 1, 0]]])
     thickness = output_thickness(SimpleNamespace(motion=SimpleNamespace(skeleton=star), world_positions=positions,
-                                                 hierarchy=None))
+                                                 hierarchy=None, preserve_volume=True))
     np.testing.assert_allclose(thickness, [[1 / np.sqrt(2), 1.0, 1.0]], rtol=1e-12)
 
 
@@ -172,3 +173,8 @@ def test_a_stretched_limb_is_thinner_in_the_preview_as_in_the_glb():
     centre = result.world_positions[frame, joint]
     ratio = np.linalg.norm(posed[alone] - centre, axis=1) / np.linalg.norm(plain[alone] - centre, axis=1)
     np.testing.assert_allclose(ratio, thickness[frame, joint], rtol=1e-9)
+    # With output.preserve_volume off the run says so, and the preview poses the plain body.
+    kept = run(motion, replace(_looney_stretched(), output=replace(_looney_stretched().output, preserve_volume=False)))
+    assert output_thickness(kept) is None
+    np.testing.assert_array_equal(pose_bodies(motion, kept, [frame]).exaggerated[0],
+                                  pose_skin(skin, rest, kept.world_rotations[frame], kept.world_positions[frame], index))

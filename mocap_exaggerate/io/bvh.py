@@ -35,8 +35,8 @@ from ..rotations import quat_from_euler, quat_to_euler
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .files import atomic_write
 
-__all__ = ["BVHReport", "read_bvh", "read_source", "load_bvh", "save_bvh", "format_bvh", "iter_bvh", "format_fixed", "motion_channels",
-           "BVH_POSITIONS", "check_bvh_positions", "written_positions"]
+__all__ = ["BVHReport", "read_bvh", "read_source", "load_bvh", "save_bvh", "format_bvh", "iter_bvh", "format_fixed",
+           "motion_channels", "BVH_POSITIONS", "check_bvh_positions", "written_positions"]
 
 log = logging.getLogger(__name__)
 
