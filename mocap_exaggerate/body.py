@@ -61,16 +61,17 @@ HEAD_RADIUS = 0.05
 
 
 def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
-    """A capsule body around ``skeleton``'s rest pose, each capsule bound to the joint that moves it.
+    """A rubber body of tubes around ``skeleton``'s rest pose (see the module's notes).
 
     skeleton : any skeleton; humanoids (`mocap_exaggerate.limbs.find_limbs`) get a thicker
         torso and a round head
-    rigid : (J,) bool, joints (fingers, toes, face, twist bones) that get no capsule of
+    rigid : (J,) bool, joints (fingers, toes, face, twist bones) that get no piece of
         their own but ride on their nearest non-rigid ancestor's; default
         `mocap_exaggerate.stages.subjoints.minor_branches`, as the pipeline prunes them
 
-    Returns a `Skin` made of closed, outward-facing capsules, one per piece, in the rest
-    pose; every vertex has a single influence (weight 1, padded to four columns).
+    Returns a `Skin` made of closed, outward-facing tubes, one per run of links, in the rest
+    pose; a vertex has one influence, or two near a joint where a tube bends (padded to four
+    columns).
     """
     from .limbs import find_limbs
     from .stages.subjoints import minor_branches
@@ -151,17 +152,17 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     rings = max(2, int(_RINGS * detail))
     steps = _STEPS if detail == 1.0 else 1  # a coarse body: no rings between a piece's ends
     parts = [_tube(start[c[0]], end[c], radius[c], mover[c], around, rings, short, steps) for c in chains]
-    vertices = np.concatenate([v for v, _, _ in parts])
-    first = np.cumsum([0] + [len(v) for v, _, _ in parts[:-1]])
-    faces = np.concatenate([f + at for (_, f, _), at in zip(parts, first)])
-    influence = np.concatenate([w for _, _, w in parts])
+    vertices = np.concatenate([part[0] for part in parts])
+    first = np.cumsum([0] + [len(part[0]) for part in parts[:-1]])
+    faces = np.concatenate([part[1] + at for part, at in zip(parts, first)])
+    owners = np.concatenate([part[2] for part in parts])
+    share = np.concatenate([part[3] for part in parts])
     joints = np.zeros((len(vertices), 4), dtype=np.int64)
     weights = np.zeros((len(vertices), 4))
-    joints[:, :2] = influence[:, :2].astype(np.int64)
-    weights[:, :2] = influence[:, 2:]
-    weights[:, 1] = np.where(joints[:, 1] == joints[:, 0], 0.0, weights[:, 1])
+    weights[:, 1] = np.where(owners[:, 1] != owners[:, 0], share, 0.0)
     weights[:, 0] = 1.0 - weights[:, 1]
-    joints[:, 1] = np.where(weights[:, 1] > 0, joints[:, 1], 0)
+    joints[:, 0] = owners[:, 0]
+    joints[:, 1] = np.where(weights[:, 1] > 0, owners[:, 1], 0)
     return Skin(vertices, faces.astype(np.int64), skeleton.names, joints, weights)
 
 
@@ -211,15 +212,15 @@ def _tube(base: np.ndarray, ends: np.ndarray, radius: np.ndarray, movers: np.nda
     two pieces' joints, handing over smoothly to each piece's own joint within a radius, so the
     tube bends there instead of parting. Rings are carried along the
     tube by a rotation-minimising frame, so it does not twist.
-    Returns vertices (V, 3), faces (T, 3) and (V, 4) influences: two joints and their two weights.
+    Returns vertices (V, 3), faces (T, 3), owners (V, 2): two joints, and share (V,): the second's weight.
     """
     points = np.vstack([base, ends])
     # A piece shorter than the tube is thick (a Daz buttock, an iClone waist) is folded into
     # its neighbour: rings a hair apart with different joints would stretch tenfold at a turn.
     length = np.linalg.norm(np.diff(points, axis=0), axis=1)
     # The last piece (a hand, a foot) keeps its own joint unless it is a mere stub.
-    while len(length) > 1 and np.min(length / radius / np.r_[np.ones(len(length) - 1), 0.25]) < 1.0:
-        i = int(np.argmin(length / radius / np.r_[np.ones(len(length) - 1), 0.25]))
+    while len(length) > 1 and np.min(stub := length / radius / np.r_[np.ones(len(length) - 1), 0.25]) < 1.0:
+        i = int(np.argmin(stub))
         # The point between it and the next piece (the last piece: the previous), which takes it over.
         points = np.delete(points, i + 1 if i + 1 < len(length) else i, axis=0)
         radius, movers = np.delete(radius, i), np.delete(movers, i)
@@ -227,29 +228,28 @@ def _tube(base: np.ndarray, ends: np.ndarray, radius: np.ndarray, movers: np.nda
     n = len(points) - 1
     if n == 1 and np.linalg.norm(points[1] - points[0]) <= short:
         vertices, faces, _ = _capsules(points[:1], points[1:], radius, around, rings)
-        influence = np.zeros((len(vertices), 4))
-        influence[:, 0] = influence[:, 1] = movers[0]
-        influence[:, 2] = 1.0
-        return vertices, faces, influence
+        return vertices, faces, np.full((len(vertices), 2), movers[0]), np.zeros(len(vertices))
     direction = np.diff(points, axis=0)
     length = np.linalg.norm(direction, axis=1)
     direction = direction / length[:, None]
     node_radius = np.concatenate([radius[:1], np.minimum(radius[:-1], radius[1:]), radius[-1:]])
 
-    # Rings along the tube: (centre, tangent, radius, stretch across the bend, joint a, joint b, weight of b).
-    centres, tangents, radii, mitre, owner_a, owner_b, share = [], [], [], [], [], [], []
+    # Rings along the tube, each (centre, tangent, radius, stretch across the bend or None,
+    # its piece's joint, the other joint it hands over to, and that joint's weight).
+    ring_rows: list[tuple] = []
+
+    def ring(centre, tangent, size, mitre=None, joint=None, other=None, part=0.0):
+        ring_rows.append((centre, tangent, size, mitre, joint, joint if other is None else other, part))
+
     # The round start: rings from the pole to the base's equator.
     polar = 0.5 * np.pi * np.arange(1, rings + 1) / rings
     for angle in polar[:-1]:
-        centres.append(points[0] - np.cos(angle) * node_radius[0] * direction[0])
-        tangents.append(direction[0])
-        radii.append(np.sin(angle) * node_radius[0])
-        mitre.append(None)
-        owner_a.append(movers[0]), owner_b.append(movers[0]), share.append(0.0)
+        ring(points[0] - np.cos(angle) * node_radius[0] * direction[0], direction[0], np.sin(angle) * node_radius[0],
+             joint=movers[0])
     # Across a joint the two pieces' joints hand over smoothly, from half and half at the joint
-    # to all of a piece's own within a radius of it (half a piece at most).
+    # to all of a piece's own within `_HAND_OVER` radii of it (half a piece at most).
     zone = np.minimum(_HAND_OVER * node_radius, 0.5 * np.minimum(np.concatenate([length[:1], length]),
-                                                    np.concatenate([length, length[-1:]])))
+                                                                 np.concatenate([length, length[-1:]])))
     # Rings this near a bent joint would cross its mitred ring on the inside of the bend.
     bend = np.concatenate([[0.0], np.arccos(np.clip(np.sum(direction[:-1] * direction[1:], axis=1), -1, 1)), [0.0]])
     clear = node_radius * (1.25 * np.tan(0.5 * bend) + np.where(bend > 0.05, 0.25, 0.0))
@@ -257,45 +257,31 @@ def _tube(base: np.ndarray, ends: np.ndarray, radius: np.ndarray, movers: np.nda
         # The piece's own rings, half a radius apart: the sub-joints bend it smoothly.
         steps = int(np.clip(np.ceil(length[i] / max(0.5 * radius[i], 1e-12)), 1, most_steps))
         for t in np.arange(0 if i == 0 else 1, steps) / steps:
-            if (i > 0 and t * length[i] < clear[i]) or (1.0 - t) * length[i] < clear[i + 1]:
+            after, before = t * length[i], (1.0 - t) * length[i]  # from the piece's start and to its end
+            if (i > 0 and after < clear[i]) or before < clear[i + 1]:
                 continue
-            ease_in = _smooth(1.0 - t / _EASE)
-            ease_out = _smooth(1.0 - (1.0 - t) / _EASE)
-            r = radius[i] + (node_radius[i] - radius[i]) * ease_in + (node_radius[i + 1] - radius[i]) * ease_out
-            centres.append(points[i] + t * length[i] * direction[i])
-            tangents.append(direction[i])
-            radii.append(r)
-            mitre.append(None)
-            other, part = movers[i], 0.0
-            if i > 0 and t * length[i] < zone[i]:
-                other, part = movers[i - 1], 0.5 * (1.0 - _smooth(t * length[i] / zone[i]))
-            elif i + 1 < n and (1.0 - t) * length[i] < zone[i + 1]:
-                other, part = movers[i + 1], 0.5 * (1.0 - _smooth((1.0 - t) * length[i] / zone[i + 1]))
-            owner_a.append(movers[i]), owner_b.append(other), share.append(part)
+            size = (radius[i] + (node_radius[i] - radius[i]) * _smooth(1.0 - t / _EASE)
+                    + (node_radius[i + 1] - radius[i]) * _smooth(1.0 - (1.0 - t) / _EASE))
+            other, part = None, 0.0
+            if i > 0 and after < zone[i]:
+                other, part = movers[i - 1], 0.5 * (1.0 - _smooth(after / zone[i]))
+            elif i + 1 < n and before < zone[i + 1]:
+                other, part = movers[i + 1], 0.5 * (1.0 - _smooth(before / zone[i + 1]))
+            ring(points[i] + after * direction[i], direction[i], size, joint=movers[i], other=other, part=part)
         if i + 1 < n:  # the joint to the next piece: a mitred ring shared by both pieces' joints
             halfway = direction[i] + direction[i + 1]
             halfway /= np.linalg.norm(halfway)
-            centres.append(points[i + 1])
-            tangents.append(halfway)
-            radii.append(node_radius[i + 1])
             across = direction[i + 1] - direction[i]
             size = np.linalg.norm(across)
-            mitre.append(None if size < 1e-9 else (across / size, 1.0 / np.dot(halfway, direction[i]) - 1.0))
-            owner_a.append(movers[i]), owner_b.append(movers[i + 1]), share.append(0.5)
-    centres.append(points[-1])  # the end's equator, then rings to its pole
-    tangents.append(direction[-1])
-    radii.append(node_radius[-1])
-    mitre.append(None)
-    owner_a.append(movers[-1]), owner_b.append(movers[-1]), share.append(0.0)
+            mitre = None if size < 1e-9 else (across / size, 1.0 / np.dot(halfway, direction[i]) - 1.0)
+            ring(points[i + 1], halfway, node_radius[i + 1], mitre, movers[i], movers[i + 1], 0.5)
+    ring(points[-1], direction[-1], node_radius[-1], joint=movers[-1])  # the end's equator, then rings to its pole
     for angle in polar[::-1][1:]:
-        centres.append(points[-1] + np.cos(angle) * node_radius[-1] * direction[-1])
-        tangents.append(direction[-1])
-        radii.append(np.sin(angle) * node_radius[-1])
-        mitre.append(None)
-        owner_a.append(movers[-1]), owner_b.append(movers[-1]), share.append(0.0)
+        ring(points[-1] + np.cos(angle) * node_radius[-1] * direction[-1], direction[-1],
+             np.sin(angle) * node_radius[-1], joint=movers[-1])
+    centres, tangents, radii, mitres, joint_a, joint_b, shares = zip(*ring_rows)
 
     # Rotation-minimising frames: the first ring's spoke carried from tangent to tangent.
-    tangents = np.array(tangents)
     w = tangents[0]
     u = np.cross(w, [1.0, 0.0, 0.0] if abs(w[0]) < 0.9 else [0.0, 1.0, 0.0])
     u /= np.linalg.norm(u)
@@ -306,19 +292,16 @@ def _tube(base: np.ndarray, ends: np.ndarray, radius: np.ndarray, movers: np.nda
         u /= np.linalg.norm(u)
         v = np.cross(w, u)
         spoke = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v  # u x v = w: anticlockwise about w
-        if mitre[k] is not None:
-            bend, extra = mitre[k]
-            spoke = spoke + extra * (spoke @ bend)[:, None] * bend
+        if mitres[k] is not None:
+            across, extra = mitres[k]
+            spoke = spoke + extra * (spoke @ across)[:, None] * across
         ring_points.append(centres[k] + radii[k] * spoke)
     count = len(ring_points)
     vertices = np.concatenate([[points[0] - node_radius[0] * direction[0]], np.concatenate(ring_points),
                                [points[-1] + node_radius[-1] * direction[-1]]])
-    influence = np.zeros((len(vertices), 4))
-    influence[1:-1, 0] = np.repeat(owner_a, around)
-    influence[1:-1, 1] = np.repeat(owner_b, around)
-    influence[1:-1, 3] = np.repeat(share, around)
-    influence[[0, -1], 0] = influence[[0, -1], 1] = [movers[0], movers[-1]]
-    influence[:, 2] = 1.0 - influence[:, 3]
+    owners = np.concatenate([[[movers[0]] * 2], np.repeat(np.column_stack([joint_a, joint_b]), around, axis=0),
+                             [[movers[-1]] * 2]]).astype(np.int64)
+    share = np.concatenate([[0.0], np.repeat(shares, around), [0.0]])
     j = np.arange(around)
     k = (j + 1) % around
     ring = 1 + np.arange(count)[:, None] * around
@@ -329,7 +312,7 @@ def _tube(base: np.ndarray, ends: np.ndarray, radius: np.ndarray, movers: np.nda
         np.stack([lower + j, upper + k, upper + j], axis=-1).reshape(-1, 3),
         np.column_stack([ring[-1] + j, ring[-1] + k, np.full(around, len(vertices) - 1)]),
     ])
-    return vertices, faces, influence
+    return vertices, faces, owners, share
 
 
 def _smooth(x: float) -> float:
