@@ -31,8 +31,8 @@ from .stages.extrapolate import extrapolate, parse_duration, smootherstep
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping, strike_scale
-from .stages.subjoints import (SubjointConfig, SubjointHierarchy, build_hierarchy, link_starts, minor_branches,
-                               position_subjoints, riders, rubber_groups)
+from .stages.subjoints import (SubjointConfig, SubjointHierarchy, build_hierarchy, even_out, link_starts,
+                               minor_branches, position_subjoints, riders, rubber_groups)
 from .tpose import detect_rest_frames
 
 __all__ = [
@@ -285,6 +285,9 @@ def _springs(state: State, config) -> State:
             lower = np.flatnonzero((hierarchy.link_child == end) & ~hierarchy.is_original)
             moving[:, upper] += hierarchy.fraction[upper][None, :, None] * shift[:, None]
             moving[:, lower] += (1.0 - hierarchy.fraction[lower])[None, :, None] * shift[:, None]
+    # The lag bunches sub-joints along a limb as well as bending it: make its sub-links even again.
+    swinging = np.unique(hierarchy.link_child[np.flatnonzero(np.asarray(blend) * active > 0)])
+    out[state.first:] = even_out(out[state.first:], hierarchy, swinging)
     substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
     carried = stable_link_stiffness(frame_time, config.link_stiffness, links.degree, substeps)
     notes = state.notes
@@ -330,7 +333,9 @@ def _constraints(state: State, plan: ConstraintPlan) -> State:
         riders=rider_joints(skeleton),
     )
     out = positions.copy()
-    out[first:] = result.positions
+    # The chains bent to meet their targets, with even sub-links again (each keeping its direction).
+    bent = [j for limb in state.limbs.values() for j in limb.joints[1:]]
+    out[first:] = even_out(result.positions, hierarchy, np.array(bent, dtype=np.int64))
     weights = np.zeros((len(positions), len(result.pin_joints)))
     weights[first:] = result.pin_weights
     contacts = {name: [[int(a) + first, int(b) + first] for a, b in runs] for name, runs in result.contacts.items()}

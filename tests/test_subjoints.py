@@ -64,13 +64,44 @@ def test_bezier_passes_through_its_points_and_is_c1():
     rng = np.random.default_rng(5)
     points = rng.normal(size=(7, 5, 3))
     knots = np.array([0.0, 1.0, 1.5, 3.5, 4.0])
-    at_knots = bezier_points(points, knots, knots)
-    assert np.allclose(at_knots, points, atol=1e-12)
+    for even in (False, True):
+        assert np.allclose(bezier_points(points, knots, knots, even=even), points, atol=1e-12)
     eps = 1e-6
+
+    def slope(k, side, even):
+        a, b = (k - eps, k) if side < 0 else (k, k + eps)
+        return (bezier_points(points, knots, np.array([b]), even=even)
+                - bezier_points(points, knots, np.array([a]), even=even)) / eps
+
     for k in knots[1:-1]:
-        left = (bezier_points(points, knots, np.array([k])) - bezier_points(points, knots, np.array([k - eps]))) / eps
-        right = (bezier_points(points, knots, np.array([k + eps])) - bezier_points(points, knots, np.array([k]))) / eps
-        assert np.allclose(left, right, atol=1e-4)
+        # As Kwon and Lee's curve: C1 in the rest-length parameter.
+        assert np.allclose(slope(k, -1, False), slope(k, 1, False), atol=1e-4)
+        # Spaced evenly along each segment, it is the same curve, still smooth (G1: one tangent direction).
+        left, right = slope(k, -1, True), slope(k, 1, True)
+        cos = np.sum(left * right, axis=-1) / np.linalg.norm(left, axis=-1) / np.linalg.norm(right, axis=-1)
+        assert np.all(cos > 1 - 1e-4)
+
+
+def test_subjoints_are_evenly_spaced_along_each_segment_of_the_curve():
+    """A segment's sub-joints cut its arc into equal pieces, whatever the points' spacing: on a
+    stretched forearm beside a captured upper arm no sub-link stretches more than the others."""
+    # Shoulder, elbow, wrist, hand: the forearm stretched 1.65x, the elbow bent 10 to 70 degrees.
+    bend = np.radians(np.linspace(10.0, 70.0, 5))
+    forearm = 1.65 * np.stack([np.cos(bend), np.sin(bend), np.zeros(5)], axis=1)
+    points = np.stack([np.zeros((5, 3)), np.tile([1.0, 0.0, 0.0], (5, 1)), [1.0, 0.0, 0.0] + forearm,
+                       [1.0, 0.0, 0.0] + forearm * (1.0 + 0.2 / 1.65)], axis=1)
+    knots = np.array([0.0, 1.0, 2.0, 2.2])
+    params = np.concatenate([np.linspace(knots[i], knots[i + 1], 9)[:-1] for i in range(3)] + [knots[-1:]])
+    dense = bezier_points(points, knots, np.linspace(0.0, 2.2, 30001), even=False)
+    on = bezier_points(points, knots, params)
+    # On the same curve: every even point is within a hair of the parametric curve.
+    gap = np.linalg.norm(on[:, :, None] - dense[:, None], axis=-1).min(axis=2)
+    assert gap.max() < 1e-3
+    steps = np.linalg.norm(np.diff(on, axis=1), axis=-1).reshape(5, 3, 8)
+    spread = steps.max(axis=2) / steps.min(axis=2)
+    assert spread.max() < 1.02  # chords of equal arcs of a smooth curve
+    plain = np.linalg.norm(np.diff(bezier_points(points, knots, params, even=False), axis=1), axis=-1)
+    assert (plain.reshape(5, 3, 8).max(axis=2) / plain.reshape(5, 3, 8).min(axis=2)).max() > 1.2  # the test can fail
 
 
 @pytest.mark.parametrize("path", all_clip_params())

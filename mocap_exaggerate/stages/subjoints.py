@@ -35,6 +35,7 @@ __all__ = [
     "rubber_groups",
     "position_subjoints",
     "bezier_points",
+    "even_out",
 ]
 
 #: Names of branches that never carry a rubber limb: digits, face, helpers.
@@ -336,7 +337,7 @@ def link_starts(hierarchy: SubjointHierarchy) -> SubjointHierarchy:
     return joints.hierarchy(sub, new_index[hierarchy.original], hierarchy.rigid, hierarchy.groups)
 
 
-def bezier_points(points: np.ndarray, knots: np.ndarray, params: np.ndarray) -> np.ndarray:
+def bezier_points(points: np.ndarray, knots: np.ndarray, params: np.ndarray, *, even: bool = True) -> np.ndarray:
     """Evaluate the C1 piecewise cubic Bézier through ``points`` at ``params``.
 
     points : (F, n, 3) float64, the curve passes through each at its knot
@@ -357,15 +358,44 @@ def bezier_points(points: np.ndarray, knots: np.ndarray, params: np.ndarray) -> 
     if n > 2:
         tangents[:, 1:-1] = (points[:, 2:] - points[:, :-2]) / (knots[2:] - knots[:-2])[:, None]
     segment = np.clip(np.searchsorted(knots, params, side="right") - 1, 0, n - 2)
-    width = knots[segment + 1] - knots[segment]
-    u = ((params - knots[segment]) / width)[:, None]
+    width = knots[1:] - knots[:-1]
+    fraction = (params - knots[segment]) / width[segment]
     # Bézier control points of each segment: P_i, P_i + h T_i / 3, P_i+1 - h T_i+1 / 3, P_i+1.
-    b0 = points[:, segment]
-    b3 = points[:, segment + 1]
-    b1 = b0 + tangents[:, segment] * (width / 3.0)[:, None]
-    b2 = b3 - tangents[:, segment + 1] * (width / 3.0)[:, None]
+    b0 = points[:, :-1]
+    b3 = points[:, 1:]
+    b1 = b0 + tangents[:, :-1] * (width / 3.0)[:, None]
+    b2 = b3 - tangents[:, 1:] * (width / 3.0)[:, None]
+    if even:
+        u = _even_parameter(b0, b1, b2, b3, segment, fraction)
+    else:
+        u = np.broadcast_to(fraction, (points.shape[0], len(params)))
+    return _bezier(b0[:, segment], b1[:, segment], b2[:, segment], b3[:, segment], u[..., None])
+
+
+def _bezier(b0, b1, b2, b3, u):
     v = 1.0 - u
     return v**3 * b0 + 3 * v * v * u * b1 + 3 * v * u * u * b2 + u**3 * b3
+
+
+#: Samples per segment of the arc-length table that spaces sub-joints evenly along their link.
+_ARC_SAMPLES = 16
+
+
+def _even_parameter(b0, b1, b2, b3, segment, fraction):
+    """(F, S): the Bézier parameter at ``fraction`` (S,) of the arc length of its ``segment`` (S,),
+    from a table of each segment's (F, n - 1) arc length at `_ARC_SAMPLES` steps."""
+    u = np.linspace(0.0, 1.0, _ARC_SAMPLES + 1)
+    basis = np.stack([(1 - u) ** 3, 3 * (1 - u) ** 2 * u, 3 * (1 - u) * u * u, u**3], axis=1)  # (K + 1, 4)
+    steps = np.diff(basis, axis=0) @ np.stack([b0, b1, b2, b3], axis=2)  # (F, n - 1, K, 3): sample to sample
+    arc = np.zeros(steps.shape[:2] + (_ARC_SAMPLES + 1,))
+    np.cumsum(np.sqrt(np.einsum("fskc,fskc->fsk", steps, steps)), axis=2, out=arc[:, :, 1:])
+    arc = arc[:, segment]  # (F, S, K + 1)
+    target = fraction * arc[..., -1]
+    below = np.clip(np.sum(arc[..., 1:] < target[..., None], axis=2), 0, _ARC_SAMPLES - 1)
+    start = np.take_along_axis(arc, below[..., None], axis=2)[..., 0]
+    step = np.take_along_axis(arc, below[..., None] + 1, axis=2)[..., 0] - start
+    within = np.divide(target - start, step, out=np.zeros_like(step), where=step > 0)
+    return (below + np.clip(within, 0.0, 1.0)) / _ARC_SAMPLES
 
 
 def position_subjoints(world_pos: np.ndarray, hierarchy: SubjointHierarchy, rest_lengths: np.ndarray) -> np.ndarray:
@@ -407,4 +437,45 @@ def position_subjoints(world_pos: np.ndarray, hierarchy: SubjointHierarchy, rest
         child_at = np.array([index[int(c)] for c in hierarchy.link_child[members]])
         params = along[child_at - 1] + hierarchy.fraction[members] * rest_lengths[hierarchy.link_child[members]]
         out[:, members] = bezier_points(world_pos[:, chain[knot_mask]], knots, params)
+    return out
+
+
+def even_out(positions: np.ndarray, hierarchy: SubjointHierarchy, links: np.ndarray) -> np.ndarray:
+    """``positions`` (F, J', 3) with the sub-links of the links ending at ``links`` (original
+    joints) made even in length, each keeping its direction.
+
+    The springs' lag bends a limb (the follow-through) and also bunches its sub-joints along it:
+    a middle sub-link stretched 2.3x where its link's chord was 1.85x tore the skin on it. Each
+    sub-link is given its share of the chain's length along its own direction, and what that
+    leaves between the chain's end and the original joint is spread along it in proportion, so
+    the bend and its motion stay as the springs made them (sliding sub-joints along the bent
+    polyline instead carried them round its corners: a forearm's sub-joints turned 63-72
+    degrees in a frame). The original joints and the start joints do not move.
+    """
+    out = positions.copy()
+    sub = np.flatnonzero(~hierarchy.is_original & (hierarchy.fraction > 0))
+    sub = sub[np.isin(hierarchy.link_child[sub], links)]
+    if not len(sub):
+        return out
+    by_link: dict[int, list[int]] = {}
+    for j in sub[np.lexsort((hierarchy.fraction[sub], hierarchy.link_child[sub]))]:
+        by_link.setdefault(int(hierarchy.link_child[j]), []).append(int(j))
+    by_size: dict[int, list[list[int]]] = {}
+    for child, members in by_link.items():
+        head = int(hierarchy.original[hierarchy.link_parent[members[0]]])
+        by_size.setdefault(len(members), []).append([head, *members, int(hierarchy.original[child])])
+    for rows in by_size.values():
+        chain = np.array(rows)  # (L, m + 2): head, sub-joints, tail
+        points = positions[:, chain]  # (F, L, m + 2, 3)
+        steps = np.diff(points, axis=2)
+        lengths = np.sqrt(np.einsum("flkc,flkc->flk", steps, steps))
+        fraction = np.concatenate([np.zeros((len(chain), 1)), hierarchy.fraction[chain[:, 1:-1]],
+                                   np.ones((len(chain), 1))], axis=1)
+        share = np.diff(fraction, axis=1)[None]  # (1, L, m + 1) of the chain's length
+        scale = np.divide(share * lengths.sum(axis=2, keepdims=True), lengths, out=np.zeros_like(lengths),
+                          where=lengths > 0)
+        even = steps * scale[..., None]
+        built = np.cumsum(even, axis=2)[:, :, :-1]  # from the head to each sub-joint
+        miss = (points[:, :, -1] - points[:, :, 0] - even.sum(axis=2))[:, :, None]
+        out[:, chain[:, 1:-1]] = points[:, :, :1] + built + fraction[None, :, 1:-1, None] * miss
     return out
