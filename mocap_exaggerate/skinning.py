@@ -135,11 +135,15 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
     of the link before and the first of the link after (a knee blends the
     thigh into the shin; on a stretched chain the skin stretches evenly, as
     the joints do). The hand-over crosses a joint only where the chain goes on
-    through it (one link in, one out), where the bones' frames meet smoothly. A
-    branch joint (hips, chest) shares its weight among its outgoing links by
-    nearness, so a left buttock takes nothing from the right thigh or the
-    spine. End joints (a hand, a head) and riders (fingers, toes) keep their
-    weight: their frames turn away from the link's (a nod, a bent wrist).
+    through it (one link in, one out), where the bones' frames meet smoothly.
+    At a branch, an end joint or the root the joint's own frame takes over
+    instead: from the joint itself at a link's start, and from half a
+    sub-link past it at a link's end (so the last sub-link's skin stretches
+    like the others). A branch joint (hips, chest) shares its weight among its
+    outgoing links by nearness, so a left buttock takes nothing from the right
+    thigh or the spine, and the crotch stays on the hips. End joints (a hand,
+    a head) and riders (fingers, toes) keep their own weight: their frames
+    turn away from the link's (a nod, a bent wrist).
 
     Kwon and Lee share the weight by the inverse distance to every sub-link of
     the joint; that spreads a branch joint over the sub-links of all its child
@@ -198,7 +202,7 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
         base = (weight[block][entry] * share)
         for owner, part in ((owners[np.arange(len(link)), slot], 1.0 - u), (owners[np.arange(len(link)), slot + 1], u)):
             value = base * part
-            keep = value > 0
+            keep = value > 1e-9  # not the rounding of a hand-over that has not begun
             rows.append(vertex[block][entry][keep])
             cols.append(owner[keep])
             vals.append(value[keep])
@@ -261,20 +265,27 @@ def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarr
         return (np.arange(len(owners)) + 0.5) / len(owners), owners
 
     # Across a joint the chain goes on through (one link in, one out), its bones' frames meet
-    # smoothly (the curve and its twist run on); at a branch, a hand or a head they do not.
+    # smoothly (the curve and its twist run on): the skin hands over from the last sub-link of one
+    # link to the first of the next. At a branch (hips, chest), an end (a hand, a head, a foot)
+    # or the root it does not: there the joint's own frame holds the skin at the joint, so the
+    # skin on both sides of it moves as one and a stretched sub-link never pulls it apart.
     def before(k: int, scale: float) -> tuple[list[float], list[int]]:
-        """The peak of the last sub-link of the link into ``k``, in units of ``scale``."""
-        if k > 0 and real[k] and len(kids[k]) == 1:
+        """The first knot of a link from ``k`` (lengths in units of ``scale``)."""
+        if k > 0 and real[k] and len(kids[k]) == 1:  # the peak of the last sub-link into ``k``
             at, owners = peaks(k)
             return [(at[-1] - 1.0) * length[k] / scale], [owners[-1]]
-        return [], []
+        return [0.0], [int(original[k])]
 
     def after(c: int, scale: float) -> tuple[list[float], list[int]]:
-        """The peak of the first sub-link of the link the chain goes on through from ``c``."""
-        if len(kids[c]) == 1:
+        """The last knot of the link into ``c``."""
+        if len(kids[c]) == 1:  # the peak of the first sub-link the chain goes on through
             at, owners = peaks(kids[c][0])
             return [1.0 + at[0] * length[kids[c][0]] / scale], [owners[0]]
-        return [], []
+        # Half a sub-link past the joint, as a next link's first peak would be: the last sub-link
+        # hands over to the joint's frame stretched as evenly as the others (at 1.0 the half
+        # sub-link before the joint took all of its stretch, twice over).
+        at, _ = peaks(c)
+        return [1.0 + (1.0 - at[-1])], [int(original[c])]
 
     heads, tails, knot_rows, owner_rows, starts, counts = [], [], [], [], [], []
     for k in range(count):
