@@ -158,3 +158,13 @@ def glb_joint_positions(glb: bytes, frame: int) -> dict[str, np.ndarray]:
 
     joints = gltf.skins[0].joints
     return {nodes[k].name: place(k)[0] for k in joints}
+
+
+def mesh_pieces(skin) -> np.ndarray:
+    """(V,) the connected piece of the mesh each vertex of ``skin`` is on (numbered from 0)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges = np.concatenate([skin.faces[:, [0, 1]], skin.faces[:, [1, 2]], skin.faces[:, [2, 0]]])
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(skin.num_vertices,) * 2)
+    return connected_components(graph, directed=False)[1]

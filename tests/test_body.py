@@ -19,7 +19,7 @@ from mocap_exaggerate.quality import face_stretch as edge_stretch
 from mocap_exaggerate.skeleton import Skeleton
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 
-from .helpers import SAMPLE_CLIPS, shared, shared_clip_params
+from .helpers import SAMPLE_CLIPS, mesh_pieces, shared, shared_clip_params
 
 ICLONE = "cmu_06_15_basketball_dribble_shoot_iclone.bvh"
 #: Rigs whose rest pose packs the limbs together: iClone (legs and arms up beside the spine),
@@ -35,9 +35,8 @@ def body_of(path):
 
 def pieces(skin) -> list[np.ndarray]:
     """The vertex indices of each connected piece of the mesh."""
-    mesh = trimesh.Trimesh(skin.vertices, skin.faces, process=False)
-    parts = trimesh.graph.connected_components(mesh.edges_unique, nodes=np.arange(len(skin.vertices)))
-    return [np.sort(np.asarray(part)) for part in parts]
+    label = mesh_pieces(skin)
+    return [np.flatnonzero(label == k) for k in range(label.max() + 1)]
 
 
 @pytest.mark.parametrize("path", SAMPLE_CLIPS, ids=lambda p: p.stem)

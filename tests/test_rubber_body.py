@@ -12,8 +12,6 @@ from types import SimpleNamespace
 import numpy as np
 import pygltflib
 import pytest
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from mocap_exaggerate.config import PipelineConfig, load_preset
@@ -27,7 +25,7 @@ from mocap_exaggerate.stages.correct import CorrectConfig
 from mocap_exaggerate.stages.extrapolate import ExtrapolateConfig
 from mocap_exaggerate.stages.springs import SpringConfig
 
-from .helpers import ROOT, SAMPLE_CLIPS, shared
+from .helpers import ROOT, SAMPLE_CLIPS, mesh_pieces, shared
 
 IDENTITY = PipelineConfig(extrapolate=ExtrapolateConfig(enabled=False, omega=1.0), correct=CorrectConfig(enabled=False),
                           springs=SpringConfig(enabled=False), contacts=ContactConfig(enabled=False))
@@ -87,12 +85,6 @@ def test_preserve_volume_off_keeps_every_bone_its_thickness(tmp_path):
         assert (_scale_tracks(glb.read_bytes()) > 0) == scaled
 
 
-def _pieces(skin) -> np.ndarray:
-    edges = np.concatenate([skin.faces[:, [0, 1]], skin.faces[:, [1, 2]], skin.faces[:, [2, 0]]])
-    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(skin.num_vertices,) * 2)
-    return connected_components(graph, directed=False)[1]
-
-
 def _gaps(motion, config) -> tuple[float, float]:
     """The farthest any joint or link middle of the output skeleton is from the posed body (every
     frame), and the same at rest, each point against the tube that carries it (in heights)."""
@@ -111,7 +103,7 @@ def _gaps(motion, config) -> tuple[float, float]:
                               axis=-2)
 
     # At rest, against the piece that carries each point (weighted to its joint or its link's head).
-    piece = _pieces(skin)
+    piece = mesh_pieces(skin)
     owners = np.concatenate([np.flatnonzero(carried), parents[child]])
     heads = np.concatenate([np.flatnonzero(carried), child])
     at_rest = points(rest)
