@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError, check_flag, check_number
-from .io.bvh import BVH_POSITIONS, FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES
+from .io.bvh import FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES, check_bvh_positions
 from .stages.contacts import ContactConfig, TargetSpec
 from .stages.correct import CorrectConfig
 from .stages.extrapolate import ExtrapolateConfig
@@ -96,9 +96,7 @@ class OutputConfig:
     def __post_init__(self) -> None:
         if self.skeleton not in _SKELETON_MODES:
             raise ConfigError(f"output.skeleton must be one of {', '.join(_SKELETON_MODES)}, got {self.skeleton!r}")
-        if self.bvh_positions not in BVH_POSITIONS:
-            raise ConfigError(f"output.bvh_positions must be one of {', '.join(BVH_POSITIONS)}, "
-                              f"got {self.bvh_positions!r:.60}")
+        check_bvh_positions(self.bvh_positions, "output.bvh_positions")
         check_flag("output.preserve_volume", self.preserve_volume)
 
 

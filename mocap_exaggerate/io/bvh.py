@@ -582,10 +582,10 @@ def _motion_from_channels(skeleton: Skeleton, values: np.ndarray, frame_time: fl
 # ---------------------------------------------------------------------------- writing
 
 
-def check_bvh_positions(positions: object) -> str:
-    """``positions`` if it is one of `BVH_POSITIONS`, else a ConfigError naming it."""
+def check_bvh_positions(positions: object, name: str = "bvh positions") -> str:
+    """``positions`` if it is one of `BVH_POSITIONS`, else a ConfigError naming it (as ``name``)."""
     if positions not in BVH_POSITIONS:
-        raise ConfigError(f"bvh positions must be one of {', '.join(BVH_POSITIONS)}, got {positions!r:.60}")
+        raise ConfigError(f"{name} must be one of {', '.join(BVH_POSITIONS)}, got {positions!r:.60}")
     return positions
 
 
