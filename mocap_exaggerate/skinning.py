@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .errors import ConfigError
 from .skeleton import Skeleton
@@ -187,6 +188,7 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
         nearest = np.full(len(block), np.inf)
         np.minimum.at(nearest, entry, distance)
         share = (np.maximum(nearest[entry], 1e-12) / np.maximum(distance, 1e-12)) ** 8
+        share *= _sibling_share(links, link, entry, point)
         share = share / np.bincount(entry, share, minlength=len(block))[entry]
         share = np.where(share < 0.01, 0.0, share)
         share = share / np.bincount(entry, share, minlength=len(block))[entry]
@@ -217,12 +219,47 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
 _BLOCK_ROWS = 1_000_000
 
 
+def _sibling_share(links: _Links, link: np.ndarray, entry: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """How a share tied between coincident sibling links is split among them, by the links after them.
+
+    Some rigs start the neck and both collars at one point (an Assimp chest, a
+    mocapbank chest): their first links lie on top of each other, every vertex
+    is as near to one as to the others, and an even three-way split of the neck
+    tore 48x at a looney crouch, where the three curves part. Within such a
+    group the link that goes on straightest (the neck, on to the head) keeps
+    the skin along the group's shared link, and a vertex goes to another
+    member only where it lies nearer that member's next link (the top of a
+    shoulder, by the upper arm), by the same (nearest / distance)^8 rule; the
+    group's total share is unchanged.
+    """
+    factor = np.ones(len(link))
+    group = links.group[link]
+    tied = np.flatnonzero(group >= 0)
+    if not len(tied):
+        return factor
+    distance = segment_distance(point[tied], links.probe_head[link[tied]], links.probe_tail[link[tied]])
+    main = links.straightest[link[tied]]
+    own = segment_distance(point[tied][main], links.head[link[tied][main]], links.tail[link[tied][main]])
+    distance[main] = np.minimum(distance[main], own)
+    _, key = np.unique(entry[tied] * (int(links.group.max()) + 1) + group[tied], return_inverse=True)
+    nearest = np.full(key.max() + 1, np.inf)
+    np.minimum.at(nearest, key, distance)
+    split = (np.maximum(nearest[key], 1e-12) / np.maximum(distance, 1e-12)) ** 8
+    factor[tied] = split / np.bincount(key, split)[key] * np.bincount(key)[key]
+    return factor
+
+
 class _Links(NamedTuple):
     """Each original joint's outgoing links, as the rows ``start[k]:start[k] + count[k]``.
 
     head, tail : (L, 3) the link's ends in the bind pose (for an end joint, the link into it)
     knots : (L, M) where each owner peaks, in link lengths from the head (NaN-padded, increasing)
     owners : (L, M) the rubber joint that peaks there (0 where padded)
+    group : (L,) a number shared by sibling links that lie on top of each other in the bind
+        pose (within 2 % of their length), -1 for every other link
+    probe_head, probe_tail : (L, 3) the link after a grouped one (its own where the chain
+        does not go on through one link), which tells the group's members apart
+    straightest : (L,) bool, the member of its group whose next link goes on straightest
     """
 
     start: np.ndarray
@@ -231,6 +268,10 @@ class _Links(NamedTuple):
     tail: np.ndarray
     knots: np.ndarray
     owners: np.ndarray
+    group: np.ndarray
+    probe_head: np.ndarray
+    probe_tail: np.ndarray
+    straightest: np.ndarray
 
 
 def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarray) -> _Links:
@@ -288,10 +329,19 @@ def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarr
         return [1.0 + (1.0 - at[-1])], [int(original[c])]
 
     heads, tails, knot_rows, owner_rows, starts, counts = [], [], [], [], [], []
+    groups, probes, turns, next_group = [], [], [], 0
     for k in range(count):
         starts.append(len(heads))
         if moving[k] and kids[k]:
-            for c in kids[k]:
+            # Siblings ending where another ends (within 2 % of its length): a k-d tree, as a root
+            # may have thousands of children.
+            tied = cKDTree(placed[kids[k]]).query_ball_point(placed[kids[k]], 0.02 * length[kids[k]])
+            for i, c in enumerate(kids[k]):
+                groups.append(next_group + min(tied[i]) if len(tied[i]) > 1 else -1)
+                probes.append((placed[c], placed[kids[c][0]]) if len(kids[c]) == 1 else (placed[k], placed[c]))
+                # How straight the chain goes on: the cosine between the link and its next one.
+                on, step = probes[-1][1] - probes[-1][0], placed[c] - placed[k]
+                turns.append(float(on @ step) / max(float(np.linalg.norm(on) * np.linalg.norm(step)), 1e-300))
                 at, owners = peaks(c)
                 k0, o0 = before(k, length[c])
                 k1, o1 = after(c, length[c])
@@ -299,11 +349,15 @@ def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarr
                 tails.append(placed[c])
                 knot_rows.append(k0 + list(at) + k1)
                 owner_rows.append(o0 + owners + o1)
+            next_group += len(kids[k])
         else:  # an end joint (a hand, a head), a rider, the root: its weight stays on it
             heads.append(placed[k])
             tails.append(placed[k])
             knot_rows.append([1.0])
             owner_rows.append([int(original[k])])
+            groups.append(-1)
+            probes.append((placed[k], placed[k]))
+            turns.append(0.0)
         counts.append(len(heads) - starts[-1])
     width = max(len(r) for r in knot_rows) + 1
     knots = np.full((len(knot_rows), width), np.nan)
@@ -311,7 +365,14 @@ def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarr
     for i, (r, o) in enumerate(zip(knot_rows, owner_rows)):
         knots[i, : len(r)] = r
         owners[i, : len(o)] = o
-    return _Links(np.array(starts), np.array(counts), np.array(heads), np.array(tails), knots, owners)
+    probe = np.array(probes).reshape(-1, 2, 3)
+    group, turn = np.array(groups, dtype=np.int64), np.array(turns)
+    straightest = np.zeros(len(group), dtype=bool)
+    for g in np.unique(group[group >= 0]):
+        members = np.flatnonzero(group == g)
+        straightest[members[np.argmax(turn[members])]] = True
+    return _Links(np.array(starts), np.array(counts), np.array(heads), np.array(tails), knots, owners,
+                  group, probe[:, 0], probe[:, 1], straightest)
 
 
 def subjoint_bind_positions(skeleton: Skeleton, hierarchy: SubjointHierarchy, bind: dict | None = None) -> np.ndarray:

@@ -122,6 +122,30 @@ def test_a_branch_joints_weight_stays_on_the_link_a_vertex_lies_by():
         assert abs(sum(weights.values()) - 1.0) < 1e-12
 
 
+def test_coincident_sibling_links_are_told_apart_by_the_links_after_them():
+    # An Assimp or mocapbank chest starts the neck and both collars at one point and ends them at
+    # another: every vertex is as near to one as to the others. A vertex on the neck goes to the
+    # neck (it continues to the head), one over a shoulder to that collar (it continues to the arm);
+    # an even three-way split tore the neck 48x on a looney crouch.
+    names = ("Chest", "Neck", "Head", "LeftCollar", "LeftShoulder", "RightCollar", "RightShoulder")
+    parents = np.array([-1, 0, 1, 0, 3, 0, 5])
+    offsets = np.array([[0, 1, 0], [0, 0.2, 0], [0, 0.2, 0], [0, 0.2, 0], [0.3, 0, 0], [0, 0.2, 0],
+                        [-0.3, 0, 0]], dtype=float)
+    ends = np.full((7, 3), np.nan)
+    ends[[2, 4, 6]] = [[0, 0.2, 0], [0.3, 0, 0], [-0.3, 0, 0]]
+    channels = tuple(("Zrotation", "Xrotation", "Yrotation") for _ in range(7))
+    skeleton = Skeleton(names, parents, offsets, channels, ends)
+    rubber = link_starts(build_hierarchy(skeleton, SubjointConfig(per_link=4)))
+    chest = skeleton.rest_positions()[0]
+    vertices = chest + np.array([[0.0, 0.1, 0.05], [0.15, 0.17, 0.05], [-0.15, 0.17, 0.05]])
+    skin = Skin(vertices, np.array([[0, 1, 2]]), ("Chest",), np.zeros((3, 1), np.int64), np.ones((3, 1)))
+    out = reweight(skin, skeleton, rubber)
+    neck, left, right = (_weights_by_name(out, v) for v in range(3))
+    assert neck and sum(w for n, w in neck.items() if n.startswith("Neck_s")) > 0.99, neck
+    assert left and sum(w for n, w in left.items() if n.startswith("LeftCollar_s")) > 0.99, left
+    assert right and sum(w for n, w in right.items() if n.startswith("RightCollar_s")) > 0.99, right
+
+
 def test_a_knee_blends_the_thigh_into_the_shin():
     skeleton = _body()
     rubber = link_starts(build_hierarchy(skeleton, SubjointConfig(per_link=4)))
