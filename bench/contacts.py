@@ -39,7 +39,7 @@ import numpy as np
 from common import FPS, cell, run_bench
 
 from mocap_exaggerate import load_bvh, load_preset
-from mocap_exaggerate.limbs import find_limbs
+from mocap_exaggerate.analysis.limbs import find_limbs
 from mocap_exaggerate.pipeline import run
 
 LEGS = ("left_leg", "right_leg")

@@ -1,7 +1,7 @@
 """Does the output read as animation or as noise? Jerk, pops, twist flips, stretch, drift.
 
 Runs every shared clip through each preset and prints, per clip and preset, the figures of
-`mocap_exaggerate.quality.motion_quality` (issue 11; h = skeleton height): jerk p99 ratio
+`mocap_exaggerate.analysis.quality.motion_quality` (issue 11; h = skeleton height): jerk p99 ratio
 (output over capture), the worst joint's largest one-frame move over its captured largest,
 twist flips (a written joint turning > 60 degrees in a frame where the capture turns < 30),
 limb stretch along the output skeleton (peak / 95th percentile / share of frames above
@@ -22,7 +22,7 @@ from common import FPS, cell, run_bench
 
 from mocap_exaggerate import load_bvh, load_preset
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.quality import motion_quality
+from mocap_exaggerate.analysis.quality import motion_quality
 
 
 def measure(path: Path, preset: str, config=None) -> dict:

@@ -11,9 +11,9 @@ import numpy as np
 
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.skin import load_skin
-from mocap_exaggerate.skinning import Skin
-from mocap_exaggerate.body import default_skin
-from mocap_exaggerate.skinning import reweight
+from mocap_exaggerate.rig.skinning import Skin
+from mocap_exaggerate.rig.body import default_skin
+from mocap_exaggerate.rig.skinning import reweight
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 from throughput import best_of as best  # same folder: run as python bench/reweight.py
 

@@ -15,17 +15,17 @@ Settings (rows)
     thickness scales).
 
 Bodies
-    ``default``: `mocap_exaggerate.body.default_skin` grown from the clip's skeleton (with the run's
+    ``default``: `mocap_exaggerate.rig.body.default_skin` grown from the clip's skeleton (with the run's
     rigid joints, as the GLB does). ``makehuman``: the MakeHuman CC0 body
     (``../shared/data/skin/makehuman_base.obj``) bound to the clip's skeleton by
-    `mocap_exaggerate.binding.bind_skin`, as ``convert``/``--skin`` binds it.
+    `mocap_exaggerate.rig.binding.bind_skin`, as ``convert``/``--skin`` binds it.
 
 How the mesh is posed (what the GLB holds)
-    The bound skin is re-weighted onto the output skeleton by `mocap_exaggerate.outputs.output_skin`
+    The bound skin is re-weighted onto the output skeleton by `mocap_exaggerate.run.outputs.output_skin`
     (4 influences, the GLB's default; `reweight` on the rubber skeleton). Each output joint's world
     transform is the forward kinematics of the output motion's local rotations and translations
     (the GLB's animation tracks), with the uniform world scale ``thickness`` of
-    `mocap_exaggerate.outputs.output_thickness` where the GLB writes one; the inverse bind matrices
+    `mocap_exaggerate.run.outputs.output_thickness` where the GLB writes one; the inverse bind matrices
     undo the output skeleton's rest positions (identity orientations). So a vertex is
     ``sum_k w_k (s_j R_j (v - rest_j) + p_j)`` over its joints j (the GLB's turn onto +Y and its
     unit scale are one similarity for the whole scene and change no figure below). The captured
@@ -206,7 +206,7 @@ def measure_body(skin, skeleton, rotations: np.ndarray, positions: np.ndarray, t
     """Every figure of one posed body: ``skin`` bound to ``skeleton`` (its rest = the bind pose),
     posed by world ``rotations`` (F, J, 4), ``positions`` (F, J, 3) and ``thickness`` (F, J) or None;
     ``carried`` (J,): the joints (and links ending at them) the distance figures measure from."""
-    from mocap_exaggerate.rotations import quat_to_matrix
+    from mocap_exaggerate.core.rotations import quat_to_matrix
 
     from scipy.sparse import csr_matrix, identity, kron, vstack
 
@@ -288,7 +288,7 @@ def measure_body(skin, skeleton, rotations: np.ndarray, positions: np.ndarray, t
 
 
 def _matrices(rotation, position, thickness, rest) -> np.ndarray:
-    from mocap_exaggerate.rotations import quat_to_matrix
+    from mocap_exaggerate.core.rotations import quat_to_matrix
 
     turn = quat_to_matrix(rotation)
     if thickness is not None:
@@ -317,10 +317,10 @@ def makehuman():
 def measure_rig(task: tuple) -> list[dict]:
     """Rows (one per setting x body) of one clip."""
     path, rig, settings, bodies, cut, step = task
-    from mocap_exaggerate.binding import bind_skin
-    from mocap_exaggerate.body import default_skin
+    from mocap_exaggerate.rig.binding import bind_skin
+    from mocap_exaggerate.rig.body import default_skin
     from mocap_exaggerate.io.bvh import read_bvh
-    from mocap_exaggerate.outputs import base_skin, output_skin, output_thickness
+    from mocap_exaggerate.run.outputs import base_skin, output_skin, output_thickness
     from mocap_exaggerate.pipeline import run
     from mocap_exaggerate.stages.subjoints import minor_branches
 

@@ -19,9 +19,9 @@ import click
 
 # Only light modules at import time: `--help` must not wait for SciPy, trimesh or pygltflib.
 from mocap_exaggerate import __version__
-from mocap_exaggerate.batch import DEFAULT_GLOB
+from mocap_exaggerate.run.batch import DEFAULT_GLOB
 from mocap_exaggerate.config import DEFAULT_PRESET, preset_description, preset_names, read_config_text, resolve_config
-from mocap_exaggerate.errors import MocapError
+from mocap_exaggerate.core.errors import MocapError
 from mocap_exaggerate.io.files import OutputExistsError
 from mocap_exaggerate.stages.contacts import parse_target
 from mocap_exaggerate.stages.stretch import parse_stretch
@@ -369,7 +369,7 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
         return _exaggerate_several(input_paths, output, name, overwrite, skin_path, units, influences, write_glb,
                                    trails_path, path_file, options, joint_map_path)
     input_path = input_paths[0]
-    from mocap_exaggerate.job import convert
+    from mocap_exaggerate.run.job import convert
 
     preset, config = _config_from_options(options)
     from_stdin = str(input_path) == "-"
@@ -422,7 +422,7 @@ def _check_output_settings(units: str, influences: str, skin_path: Path | None,
 
 def _joint_map(skin_path: Path | None, joint_map_path: Path | None) -> dict | None:
     """The --joint-map file read (None without one); refused without a --skin to pair with."""
-    from mocap_exaggerate.binding import read_joint_map
+    from mocap_exaggerate.rig.binding import read_joint_map
 
     if joint_map_path is None:
         return None
@@ -433,7 +433,7 @@ def _joint_map(skin_path: Path | None, joint_map_path: Path | None) -> dict | No
 
 def _batch_options(options: dict[str, Any], *, overwrite: bool, resume: bool, write_glb: bool,
                    skin_path: Path | None, units: str, influences: str, joint_map_path: Path | None = None):
-    from mocap_exaggerate.batch import BatchOptions
+    from mocap_exaggerate.run.batch import BatchOptions
 
     preset, config = _config_from_options(options)
     joint_map = (_check_output_settings(units, influences, skin_path, joint_map_path) if write_glb
@@ -449,7 +449,7 @@ def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bo
     the exit code (0 all done, 1 some failed, 130 interrupted)."""
     import time
 
-    from mocap_exaggerate.batch import BatchInterrupted, run_batch
+    from mocap_exaggerate.run.batch import BatchInterrupted, run_batch
 
     from .report import Progress, summary
 
@@ -474,7 +474,7 @@ def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bo
     results = list(problems) + results
     report = None
     if batch_options.report:
-        from mocap_exaggerate.report import write_report
+        from mocap_exaggerate.viz.report import write_report
 
         try:
             report = str(write_report(out_dir, results, pending=pending, title=f"Batch report: {out_dir}",
@@ -490,7 +490,7 @@ def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bo
 
 def _exaggerate_several(input_paths, output: Path, name, overwrite, skin_path, units, influences, write_glb,
                         trails_path, path_file, options, joint_map_path=None) -> None:
-    from mocap_exaggerate.batch import Clip, same_outputs
+    from mocap_exaggerate.run.batch import Clip, same_outputs
 
     if any(str(p) == "-" for p in input_paths):
         raise UserError("'-' (standard input) can only be the one input")
@@ -526,7 +526,7 @@ def folder_arguments(func: Callable) -> Callable:
 
 def _find_batch_clips(in_dir: Path, out_dir: Path, pattern: str):
     """The clips a batch or plan takes, and what was met on the way; a usage error when none match."""
-    from mocap_exaggerate.batch import check_folders, find_clips
+    from mocap_exaggerate.run.batch import check_folders, find_clips
 
     check_folders(in_dir, out_dir, pattern)
     clips, problems = find_clips(in_dir, pattern, exclude=[out_dir])
@@ -576,7 +576,7 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
     """
     import shlex
 
-    from mocap_exaggerate.batch import check_scheduler, default_jobs
+    from mocap_exaggerate.run.batch import check_scheduler, default_jobs
 
     batch_options = _batch_options(options, overwrite=overwrite, resume=resume, write_glb=write_glb,
                                    skin_path=skin_path, units=units, influences=influences,
@@ -593,7 +593,7 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
     _writable(out_dir)
     try:
         if write_report:
-            from mocap_exaggerate.report import check_report
+            from mocap_exaggerate.viz.report import check_report
 
             check_report(out_dir)
         given = _given_options(click.get_current_context(), exclude=set())
@@ -711,7 +711,7 @@ def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float
     Example:
       mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs --groups --contacts
     """
-    from mocap_exaggerate.job import describe
+    from mocap_exaggerate.run.job import describe
 
     label = "<stdin>" if str(input_path) == "-" else str(input_path)
     data = describe(input_path, fps=fps, limbs=limbs, groups=groups, contacts=contacts, label=label,
@@ -785,7 +785,7 @@ def preview(input_path: Path, output: Path, count: int, trajectory: str | None, 
       mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o run.gif
       mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o foot.png --trajectory lFoot
     """
-    from mocap_exaggerate.preview import write_preview
+    from mocap_exaggerate.viz.preview import write_preview
 
     _, config = _config_from_options(options)
     from_stdin = str(input_path) == "-"

@@ -19,11 +19,11 @@ __version__ = "0.1.0"
 
 #: Public name -> module that defines it.
 _EXPORTS = {
-    "ConfigError": "errors",
-    "InputError": "errors",
-    "MocapError": "errors",
-    "Motion": "motion",
-    "Skeleton": "skeleton",
+    "ConfigError": "core.errors",
+    "InputError": "core.errors",
+    "MocapError": "core.errors",
+    "Motion": "core.motion",
+    "Skeleton": "core.skeleton",
     "PipelineConfig": "config",
     "load_preset": "config",
     "resolve_config": "config",
@@ -32,9 +32,9 @@ _EXPORTS = {
     "save_bvh": "io.bvh",
     "run": "pipeline",
     "exaggerate": "pipeline",
-    "convert": "job",
-    "JobRecord": "job",
-    "describe": "job",
+    "convert": "run.job",
+    "JobRecord": "run.job",
+    "describe": "run.job",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -21,19 +21,20 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 
 from .config import DEFAULT_PRESET, InputConfig, PipelineConfig, load_preset
-from .errors import ConfigError
-from .limbs import LIMB_NAMES, find_limbs, limb_joints
-from .motion import Motion
-from .skeleton import Skeleton
+from .core.errors import ConfigError
+from .analysis.limbs import LIMB_NAMES, find_limbs, limb_joints
+from .core.motion import Motion
+from .core.skeleton import Skeleton
 from .stages.contacts import ContactConfig, StretchKey, TargetSpec, constrain
 from .stages.correct import CorrectReport, accent_stretch, correct, keep_bends
-from .stages.extrapolate import extrapolate, parse_duration, smootherstep
+from .stages.extrapolate import extrapolate
+from .core.timing import parse_duration, smootherstep
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping, strike_scale
 from .stages.subjoints import (SubjointConfig, SubjointHierarchy, build_hierarchy, even_out, link_starts,
                                minor_branches, position_subjoints, riders, rubber_groups)
-from .tpose import detect_rest_frames
+from .analysis.tpose import detect_rest_frames
 
 __all__ = [
     "State",
@@ -412,7 +413,7 @@ class PipelineResult:
     timings : seconds per step, in run order
     correct_report : CorrectReport or None when correction was off
     preserve_volume : ``output.preserve_volume``: the skinned outputs (GLB, previews) scale
-        each joint by `mocap_exaggerate.outputs.output_thickness`
+        each joint by `mocap_exaggerate.run.outputs.output_thickness`
     """
 
     motion: Motion

@@ -9,7 +9,7 @@ import numpy as np
 import pygltflib
 import pytest
 
-from mocap_exaggerate.rotations import quat_rotate
+from mocap_exaggerate.core.rotations import quat_rotate
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE_DIR = ROOT / "sample_data"
@@ -111,7 +111,7 @@ def skinned_vertices(glb: bytes, frame: int, result, meters: float):
     ibm = read(gltf.skins[0].inverseBindMatrices, np.float32, 16).reshape(-1, 4, 4).transpose(0, 2, 1)
     # Bind matrices are pure translations: v' = sum_j w_j (s_j R_j (v + t_j) + p_j), with s_j the
     # joint's world scale where the GLB keeps a stretched link's volume (output_thickness).
-    from mocap_exaggerate.outputs import output_thickness
+    from mocap_exaggerate.run.outputs import output_thickness
 
     local = positions[:, None, :] + ibm[joints, :3, 3]
     turned = quat_rotate(result.world_rotations[frame][joints], local)
@@ -125,7 +125,7 @@ def skinned_vertices(glb: bytes, frame: int, result, meters: float):
 def glb_joint_positions(glb: bytes, frame: int) -> dict[str, np.ndarray]:
     """Every joint node's world position at ``frame`` in the GLB's own frame (Y up, metres),
     by walking its nodes' rest transforms and animation keys: what any glTF viewer computes."""
-    from mocap_exaggerate.rotations import quat_mul
+    from mocap_exaggerate.core.rotations import quat_mul
 
     gltf = pygltflib.GLTF2.load_from_bytes(glb)
     blob = gltf.binary_blob()

@@ -18,8 +18,8 @@ from pathlib import Path
 import pytest
 
 from mocap_exaggerate import load_preset
-from mocap_exaggerate.batch import BatchOptions, Clip, find_clips, glob_regex, run_batch
-from mocap_exaggerate.job import check_output_set
+from mocap_exaggerate.run.batch import BatchOptions, Clip, find_clips, glob_regex, run_batch
+from mocap_exaggerate.run.job import check_output_set
 
 from .helpers import SAMPLE_DIR
 
@@ -334,7 +334,7 @@ def test_resume_knows_a_skin_by_its_content(tmp_path):
     """The skin is part of the parameters: the same skin keeps finished clips, another redoes them."""
     import numpy as np
 
-    from mocap_exaggerate.body import default_skin
+    from mocap_exaggerate.rig.body import default_skin
     from mocap_exaggerate.io.bvh import read_bvh
 
     folder = tmp_path / "in"

@@ -6,7 +6,7 @@ import bvhio
 import numpy as np
 import pytest
 
-from mocap_exaggerate.errors import InputError
+from mocap_exaggerate.core.errors import InputError
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh, save_bvh
 from mocap_exaggerate.io.files import OutputExistsError
 

@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from mocap_exaggerate.config import resolve_config
-from mocap_exaggerate.errors import ConfigError
+from mocap_exaggerate.core.errors import ConfigError
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh, save_bvh
 from mocap_exaggerate.pipeline import PipelineResult, run
 

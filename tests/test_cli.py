@@ -251,7 +251,7 @@ def test_glb_options(runner, sample_clip, tmp_path):
     result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "d"), "--influences", "8",
                                  "--skin", str(tmp_path / "b" / "cmu_09_01_run_daz.glb")])
     # A GLB made from this clip on the rubber skeleton (in cm) is a character for it: bound by name, the
-    # sub-joints riding their links (`mocap_exaggerate.binding`).
+    # sub-joints riding their links (`mocap_exaggerate.rig.binding`).
     assert result.exit_code == 0, result.stderr
     binding = json.loads((tmp_path / "d" / "cmu_09_01_run_daz.json").read_text())["skin_binding"]
     assert binding["by"]["name"] == 43 and binding["scale"] == pytest.approx(100.0, rel=1e-4)  # written in metres from cm

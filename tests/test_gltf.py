@@ -18,12 +18,12 @@ from mocap_exaggerate.io.gltf import unit_scale
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.config import load_preset, resolve_config
 from mocap_exaggerate.io.skin import load_skin
-from mocap_exaggerate.outputs import make_glb, output_thickness
+from mocap_exaggerate.run.outputs import make_glb, output_thickness
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.skinning import Skin
-from mocap_exaggerate.rotations import quat_mul, quat_rotate
-from mocap_exaggerate.body import default_skin
-from mocap_exaggerate.skinning import reweight, subjoint_bind_positions
+from mocap_exaggerate.rig.skinning import Skin
+from mocap_exaggerate.core.rotations import quat_mul, quat_rotate
+from mocap_exaggerate.rig.body import default_skin
+from mocap_exaggerate.rig.skinning import reweight, subjoint_bind_positions
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 
 from .helpers import ROOT, SHARED_BVH, all_clip_params, shared, skinned_vertices
@@ -236,7 +236,7 @@ def test_eight_influences_and_a_glb_skin(sample_clip, tmp_path):
     assert back.joints.shape[1] == 8 and np.allclose(back.weights.sum(axis=1), 1.0, atol=1e-6)
     assert (back.weights > 0).sum(axis=1).max() > 4
     # A character bound in another pose, axes and units (MakeHuman: A-pose, Y up, decimetres) is fitted
-    # to the clip (`mocap_exaggerate.binding`): a clean GLB, on the rubber skeleton, with 8 influences.
+    # to the clip (`mocap_exaggerate.rig.binding`): a clean GLB, on the rubber skeleton, with 8 influences.
     if (SHARED_BVH.parent / "skin").is_dir():
         makehuman = load_skin(SHARED_BVH.parent / "skin" / "makehuman_base.obj")
         glb_mh, _, _ = make_glb(motion, rubber, makehuman, "cm", influences=8)
@@ -264,7 +264,7 @@ def test_vertex_normals_are_trimeshs(sample_clip):
 
 def test_blocked_reweighting_equals_the_whole_expansion(sample_clip, monkeypatch):
     """Re-weighting in blocks of a few rows gives what one block of everything gives."""
-    import mocap_exaggerate.skinning as skinning
+    import mocap_exaggerate.rig.skinning as skinning
 
     skeleton = read_bvh(sample_clip)[0].skeleton
     hierarchy = run(read_bvh(sample_clip)[0].slice(slice(0, 5)), load_preset("cartoon")).hierarchy
@@ -280,7 +280,7 @@ def test_gltf_json_is_pygltflibs_text(tmp_path):
     """The fast JSON writer gives pygltflib's own text, character for character, on real documents:
     8 influences (two attribute sets), looney volume scales, a 3,000-frame clip of 75 joints."""
     import mocap_exaggerate.io.gltf as gltf_module
-    from mocap_exaggerate.job import convert
+    from mocap_exaggerate.run.job import convert
 
     seen = []
 

@@ -338,7 +338,7 @@ from click.testing import CliRunner  # noqa: E402
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-from mocap_exaggerate.errors import MocapError  # noqa: E402
+from mocap_exaggerate.core.errors import MocapError  # noqa: E402
 from mocap_exaggerate.io.bvh import read_bvh  # noqa: E402
 from mocap_exaggerate_cli.main import cli  # noqa: E402
 

@@ -12,7 +12,7 @@ import pytest
 
 from mocap_exaggerate import convert
 from mocap_exaggerate.config import resolve_config
-from mocap_exaggerate.errors import ConfigError, InputError
+from mocap_exaggerate.core.errors import ConfigError, InputError
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.files import OutputExistsError, OutputSet, write_files
 from mocap_exaggerate.pipeline import STAGES, Stage, run
@@ -173,7 +173,7 @@ def test_a_stage_added_to_the_declared_list_runs_in_its_place(sample_clip):
 
 
 def test_a_set_is_complete_only_while_every_file_matches_its_manifest(sample_clip, tmp_path):
-    from mocap_exaggerate.job import check_output_set
+    from mocap_exaggerate.run.job import check_output_set
 
     record = convert(sample_clip, tmp_path, FAST, glb=False)
     manifest = record.outputs["manifest"]
@@ -212,7 +212,7 @@ def test_an_input_named_like_a_temporary_is_not_cleared_away(sample_clip, tmp_pa
 
 
 def test_outputs_a_run_no_longer_writes_do_not_stay_beside_its_manifest(sample_clip, tmp_path):
-    from mocap_exaggerate.job import check_output_set
+    from mocap_exaggerate.run.job import check_output_set
 
     convert(sample_clip, tmp_path, FAST)
     with pytest.raises(OutputExistsError):

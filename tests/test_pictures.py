@@ -9,7 +9,7 @@ import numpy as np
 from mocap_exaggerate import load_preset
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.preview import fastest_end, render_preview, render_trajectory, telling_frames, telling_window
+from mocap_exaggerate.viz.preview import fastest_end, render_preview, render_trajectory, telling_frames, telling_window
 
 from .helpers import SAMPLE_DIR
 

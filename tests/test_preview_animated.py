@@ -15,10 +15,10 @@ from click.testing import CliRunner
 from PIL import Image
 
 from mocap_exaggerate import load_preset
-from mocap_exaggerate.errors import ConfigError
+from mocap_exaggerate.core.errors import ConfigError
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.preview import (animation_frames, gif_durations, pose_bodies, preview_window, render_gif,
+from mocap_exaggerate.viz.preview import (animation_frames, gif_durations, pose_bodies, preview_window, render_gif,
                                       view_limits, write_preview)
 from mocap_exaggerate_cli.main import cli
 

@@ -1,6 +1,6 @@
 """Issue 11's done-means on every shared clip: motion that reads as animation, presets that keep their word.
 
-The figures are `mocap_exaggerate.quality.motion_quality` (``bench/quality.py`` prints them
+The figures are `mocap_exaggerate.analysis.quality.motion_quality` (``bench/quality.py`` prints them
 all). Skipped, saying why, where ../shared/data is absent.
 """
 
@@ -12,7 +12,7 @@ import pytest
 from mocap_exaggerate import load_preset
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.quality import motion_quality
+from mocap_exaggerate.analysis.quality import motion_quality
 
 from .helpers import shared_clip_params
 
@@ -69,7 +69,7 @@ def test_rubber_limbs_do_not_kink_next_to_the_shoulder_or_hip(path):
     # 11-16 % of the boxer's looney frames. The capture's own bend there is a few degrees.
     motion, result, _ = _run(path, "looney")
     hierarchy, skeleton, points = result.hierarchy, result.hierarchy.skeleton, result.world_positions
-    from mocap_exaggerate.limbs import find_limbs
+    from mocap_exaggerate.analysis.limbs import find_limbs
 
     for name, limb in find_limbs(motion.skeleton).items():
         if not name.endswith(("_arm", "_leg")):

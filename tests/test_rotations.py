@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mocap_exaggerate.rotations import (
+from mocap_exaggerate.core.rotations import (
     quat_angle,
     quat_from_euler,
     quat_inv,

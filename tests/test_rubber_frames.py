@@ -9,8 +9,8 @@ import pytest
 from mocap_exaggerate.config import resolve_config
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.skeleton import Skeleton
-from mocap_exaggerate.skinning import Skin, reweight, subjoint_bind_positions
+from mocap_exaggerate.core.skeleton import Skeleton
+from mocap_exaggerate.rig.skinning import Skin, reweight, subjoint_bind_positions
 from mocap_exaggerate.stages.subjoints import SubjointConfig, build_hierarchy, link_starts
 
 from .helpers import SAMPLE_DIR, all_clip_params
@@ -47,7 +47,7 @@ def test_every_rubber_bone_points_along_its_sub_link_in_the_written_file(path, s
     assert angles.size and angles.max() <= 1.0, (path.name, setting, angles.max())
     if setting == "identity":  # and the original joints are the captured ones, orientations too
         captured_rot, captured_pos = motion.forward_kinematics()
-        from mocap_exaggerate.rotations import quat_angle
+        from mocap_exaggerate.core.rotations import quat_angle
 
         assert np.max(quat_angle(result.world_rotations[:, result.original_index], captured_rot)) <= 1e-6
 
@@ -70,7 +70,7 @@ def test_each_cut_link_starts_with_a_zero_length_joint_on_its_original_joint():
 def test_twist_between_the_ends_is_spread_along_the_link():
     # A straight arm whose hand turns 90 degrees about the forearm: the forearm's sub-joints take
     # 0, 1/4, 1/2, 3/4 of it, each bone still along the forearm.
-    from mocap_exaggerate.rotations import quat_angle, quat_from_axis_angle, quat_rotate
+    from mocap_exaggerate.core.rotations import quat_angle, quat_from_axis_angle, quat_rotate
     from mocap_exaggerate.stages.orient import curve_frames
 
     skeleton = Skeleton(("Shoulder", "Elbow", "Hand"), np.array([-1, 0, 1]),

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mocap_exaggerate.errors import ConfigError
+from mocap_exaggerate.core.errors import ConfigError
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.config import load_preset
 from mocap_exaggerate.pipeline import run

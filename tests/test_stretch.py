@@ -7,9 +7,9 @@ import pytest
 from click.testing import CliRunner
 
 from mocap_exaggerate_cli.main import cli
-from mocap_exaggerate.errors import ConfigError
+from mocap_exaggerate.core.errors import ConfigError
 from mocap_exaggerate.io.bvh import read_bvh
-from mocap_exaggerate.limbs import find_limbs
+from mocap_exaggerate.analysis.limbs import find_limbs
 from mocap_exaggerate.config import PipelineConfig, resolve_config
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.stages.stretch import (

@@ -29,10 +29,10 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..errors import ConfigError, InputError
-from ..motion import Motion
-from ..rotations import quat_from_euler, quat_to_euler
-from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
+from ..core.errors import ConfigError, InputError
+from ..core.motion import Motion
+from ..core.rotations import quat_from_euler, quat_to_euler
+from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .files import atomic_write
 
 __all__ = ["BVHReport", "read_bvh", "read_source", "load_bvh", "save_bvh", "format_bvh", "iter_bvh", "format_fixed",

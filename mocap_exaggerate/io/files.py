@@ -8,7 +8,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from ..errors import MocapError
+from ..core.errors import MocapError
 
 __all__ = ["OutputExistsError", "OutputSet", "atomic_write", "write_files", "same_file", "remove_stale_temporaries"]
 

@@ -18,10 +18,10 @@ import struct
 import numpy as np
 import pygltflib as gl
 
-from ..errors import ConfigError
-from ..motion import Motion
-from ..rotations import quat_mul, quat_rotate, quat_unroll
-from ..skinning import Skin
+from ..core.errors import ConfigError
+from ..core.motion import Motion
+from ..core.rotations import quat_mul, quat_rotate, quat_unroll
+from ..rig.skinning import Skin
 
 __all__ = ["UNITS", "UPRIGHT", "unit_scale", "format_glb", "glb_pieces", "vertex_normals"]
 

@@ -1,6 +1,6 @@
 """Skin file formats: NPZ, glTF/GLB skinned meshes and MakeHuman (.obj + .mhw) readers, the NPZ bytes writer.
 
-The `Skin` type itself and influence pruning live in `mocap_exaggerate.skinning`.
+The `Skin` type itself and influence pruning live in `mocap_exaggerate.rig.skinning`.
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from ..rotations import quat_to_matrix
-from ..skinning import Skin, top_influences
+from ..core.errors import InputError
+from ..core.rotations import quat_to_matrix
+from ..rig.skinning import Skin, top_influences
 
 __all__ = ["load_skin", "check_skin", "load_npz_skin", "load_gltf_skin", "load_makehuman_skin", "npz_bytes"]
 

@@ -39,11 +39,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import ConfigError, check_flag, check_number
-from ..limbs import Limb
-from ..rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
-from ..skeleton import Skeleton
-from .extrapolate import check_duration, parse_duration, parse_frame, smootherstep, spread_max
+from ..core.errors import ConfigError, check_flag, check_number
+from ..analysis.limbs import Limb
+from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
+from ..core.skeleton import Skeleton
+from ..core.timing import check_duration, parse_duration, parse_frame, smootherstep, spread_max
 
 __all__ = [
     "ContactConfig",
@@ -318,7 +318,7 @@ def _mask_from_runs(runs: np.ndarray, length: int) -> np.ndarray:
 
 def _speed(points: np.ndarray, frame_time: float) -> np.ndarray:
     """Speed ``(F, P)`` of points ``(F, P, 3)`` by central differences over a light smoothing."""
-    from .extrapolate import gaussian_average
+    from ..core.timing import gaussian_average
 
     smooth = gaussian_average(points, max(0.02 / frame_time, 0.5))
     velocity = np.gradient(smooth, frame_time, axis=0) if len(points) > 1 else np.zeros_like(points)

@@ -40,8 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ConfigError, check_flag, check_number
-from .extrapolate import check_duration, smootherstep, spread_max
+from ..core.errors import ConfigError, check_flag, check_number
+from ..core.timing import check_duration, smootherstep, spread_max
 
 __all__ = ["CorrectConfig", "CorrectReport", "accent_stretch", "correct", "keep_bends", "stretch_error"]
 

@@ -25,11 +25,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import local_from_world
-from ..motion import Motion
-from ..rotations import (quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow,
+from ..core.kinematics import local_from_world
+from ..core.motion import Motion
+from ..core.rotations import (quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow,
                          quat_rotate, quat_slerp)
-from .extrapolate import smootherstep, step_gain
+from ..core.timing import smootherstep, step_gain
 from .subjoints import SubjointHierarchy, link_starts, riders
 
 __all__ = ["recover_orientations", "curve_frames", "motion_from_world", "incoming_joint"]

@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import ConfigError, check_flag, check_number
+from ..core.errors import ConfigError, check_flag, check_number
 
 __all__ = ["SpringConfig", "SpringLinks", "simulate_springs", "spring_links", "spring_substeps", "stable_link_stiffness", "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE"]
 

@@ -24,10 +24,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import ConfigError, check_number
-from ..limbs import limb_length
-from ..rotations import quat_between, quat_rotate
-from .extrapolate import parse_duration, parse_frame
+from ..core.errors import ConfigError, check_number
+from ..analysis.limbs import limb_length
+from ..core.rotations import quat_between, quat_rotate
+from ..core.timing import parse_duration, parse_frame
 
 __all__ = [
     "StretchSpec",
@@ -500,7 +500,7 @@ def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float
     limb's reach at the strike's end in limb lengths; `strike_scale` turns it
     into a factor on whatever reach the motion being stretched has there.
     """
-    from .extrapolate import gaussian_average
+    from ..core.timing import gaussian_average
 
     frames = world_pos.shape[0]
     if frames < 8:

@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError, check_flag
-from ..limbs import find_limbs
-from ..skeleton import POSITION_CHANNELS, Skeleton
+from ..core.errors import ConfigError, check_flag
+from ..analysis.limbs import find_limbs
+from ..core.skeleton import POSITION_CHANNELS, Skeleton
 
 __all__ = [
     "SubjointConfig",

@@ -9,7 +9,7 @@ is what the rest of the tool takes:
    ``clip joint = skin joint``); then the joints whose *role* both skeletons
    show: hips, spine and neck chains, head, and for each side clavicle, upper
    arm, forearm, hand, hip, thigh, shin, foot and toe, found by the limb
-   finder (`mocap_exaggerate.limbs`), so CMU, Daz, iClone, MakeHuman,
+   finder (`mocap_exaggerate.analysis.limbs`), so CMU, Daz, iClone, MakeHuman,
    Mixamo, 3ds Max and assimp names pair without a table; spine and neck
    joints pair by where they sit along their chain; last, joints with the
    same name (fingers). Each joint pairs once.
@@ -43,10 +43,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ConfigError, InputError
-from .limbs import find_limbs
-from .rotations import quat_between, quat_to_matrix
-from .skeleton import Skeleton
+from ..core.errors import ConfigError, InputError
+from ..analysis.limbs import find_limbs
+from ..core.rotations import quat_between, quat_to_matrix
+from ..core.skeleton import Skeleton
 from .skinning import Skin, top_influences
 
 __all__ = ["Binding", "joint_roles", "pair_joints", "bind_skin", "skin_skeleton", "read_joint_map", "needs_binding"]
@@ -128,7 +128,7 @@ def joint_roles(skeleton: Skeleton) -> tuple[dict[str, int], dict[str, list[int]
     """
     if skeleton.num_joints < 3:
         return {}, {}
-    from .limbs import _common_ancestor
+    from ..analysis.limbs import _common_ancestor
 
     limbs = find_limbs(skeleton)
     roles: dict[str, int] = {}

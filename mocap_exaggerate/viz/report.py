@@ -18,7 +18,7 @@ import os
 from pathlib import Path
 from urllib.parse import quote
 
-from .errors import ConfigError
+from ..core.errors import ConfigError
 
 __all__ = ["REPORT_FOLDER", "picture_paths", "write_pictures", "pictures_current", "write_report", "check_report"]
 
@@ -43,7 +43,7 @@ def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
     The record names the fastest end effector, the frames drawn, and the output BVH's
     digest the pictures were drawn from.
     """
-    from .io.files import write_files
+    from ..io.files import write_files
     from .preview import fastest_end, render_preview, render_trajectory, telling_frames, telling_window
 
     motion, result = record.captured, record.result
@@ -110,7 +110,7 @@ def write_report(out_dir: str | os.PathLike, results, *, pending=(), title: str 
     pending : clips never started (an interrupted batch), listed as such
     settings : one line saying how the batch ran (preset, options), shown under the title
     """
-    from .io.files import atomic_write
+    from ..io.files import atomic_write
 
     out_dir = Path(out_dir)
     rows = [_row(out_dir, result, number) for number, result in enumerate(results)]

@@ -21,9 +21,9 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .errors import ConfigError
-from .skeleton import Skeleton
-from .stages.subjoints import SubjointHierarchy
+from ..core.errors import ConfigError
+from ..core.skeleton import Skeleton
+from ..stages.subjoints import SubjointHierarchy
 
 __all__ = ["Skin", "top_influences", "reweight", "segment_distance", "subjoint_bind_positions"]
 
@@ -41,7 +41,7 @@ class Skin:
         is not the skeleton's rest pose (MakeHuman's A-pose); empty otherwise
     parents : joint name -> its parent's name, the skin's own hierarchy where the
         file gives one (a glTF node tree, a MakeHuman .mhskel); roots are absent.
-        `mocap_exaggerate.binding` uses it to fit a character to another rig.
+        `mocap_exaggerate.rig.binding` uses it to fit a character to another rig.
     """
 
     vertices: np.ndarray

@@ -6,7 +6,7 @@ knee, ankle and foot; the spine; the neck) is ONE closed tube, round at both
 ends. A ring at a joint lies in the plane halving the bend and is shared half
 and half by the two links' joints, handing over smoothly to each link's own
 joint within two radii of it, so the tube bends at the joint instead of parting
-there; on the rubber skeleton `mocap_exaggerate.skinning.reweight` spreads each
+there; on the rubber skeleton `mocap_exaggerate.rig.skinning.reweight` spreads each
 link's weight over its sub-joints, and the tube follows the link's curve. Rings
 sit half a radius apart, so a bent link is round all along. Where a run branches
 (hips, chest) each child run starts with a round end buried in its parent's,
@@ -15,7 +15,7 @@ moved by the branch joint; runs meeting at more than `MAX_BEND` in the rest pose
 separate tubes, each round at the joint they share. A link shorter than its
 tube is thick (a Daz buttock, an iClone waist) is folded into its neighbour.
 Thinner where stretched: the GLB scales each joint by
-`mocap_exaggerate.outputs.output_thickness` (volume kept), and so does the preview.
+`mocap_exaggerate.run.outputs.output_thickness` (volume kept), and so does the preview.
 
 Why not separate capsules, one per link (the body before): a capsule's round
 ends overlapped its neighbours', and on the rubber skeleton the overlapping caps
@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .skeleton import Skeleton
+from ..core.skeleton import Skeleton
 from .skinning import Skin
 
 __all__ = ["default_skin", "LIMB_RADIUS", "TORSO_RADIUS", "HEAD_RADIUS"]
@@ -63,7 +63,7 @@ HEAD_RADIUS = 0.05
 def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     """A rubber body of tubes around ``skeleton``'s rest pose (see the module's notes).
 
-    skeleton : any skeleton; humanoids (`mocap_exaggerate.limbs.find_limbs`) get a thicker
+    skeleton : any skeleton; humanoids (`mocap_exaggerate.analysis.limbs.find_limbs`) get a thicker
         torso and a round head
     rigid : (J,) bool, joints (fingers, toes, face, twist bones) that get no piece of
         their own but ride on their nearest non-rigid ancestor's; default
@@ -73,8 +73,8 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     pose; a vertex has one influence, or two near a joint where a tube bends (padded to four
     columns).
     """
-    from .limbs import find_limbs
-    from .stages.subjoints import minor_branches
+    from ..analysis.limbs import find_limbs
+    from ..stages.subjoints import minor_branches
 
     rigid = minor_branches(skeleton) if rigid is None else np.asarray(rigid, dtype=bool)
     count = skeleton.num_joints

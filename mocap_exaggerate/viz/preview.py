@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ConfigError, check_number
-from .motion import Motion
-from .outputs import base_skin, output_skin, output_thickness
-from .pipeline import PipelineResult
-from .rotations import quat_rotate
-from .skeleton import Skeleton
-from .skinning import Skin
+from ..core.errors import ConfigError, check_number
+from ..core.motion import Motion
+from ..run.outputs import base_skin, output_skin, output_thickness
+from ..pipeline import PipelineResult
+from ..core.rotations import quat_rotate
+from ..core.skeleton import Skeleton
+from ..rig.skinning import Skin
 
 __all__ = ["pose_skin", "pose_bodies", "PosedBodies", "view_limits", "render_preview", "telling_frames", "lined_up",
            "write_preview", "fastest_end", "render_trajectory", "telling_window", "preview_window",
@@ -54,7 +54,7 @@ def pose_skin(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np
     bind : (J, 3) rest (bind) position of each skeleton joint;
     world_rot : (..., J, 4), world_pos : (..., J, 3), any leading axes (frames) broadcast;
     joint_index : (len(skin.joint_names),) skeleton index of each skin joint;
-    scale : (..., J) world scale of each joint (the GLB's `mocap_exaggerate.outputs.output_thickness`) or None.
+    scale : (..., J) world scale of each joint (the GLB's `mocap_exaggerate.run.outputs.output_thickness`) or None.
     The bind pose has identity orientations (BVH rest), so a vertex moves as
     ``s_j R_j (v - bind_j) + p_j`` under joint j.
     """
@@ -307,7 +307,7 @@ def _camera(root_across: np.ndarray, points: np.ndarray, tall: float, sigma: flo
     surges show: the extrapolation's own Gaussian average, whose point-reflected ends keep a
     steady run steady there.
     """
-    from .stages.extrapolate import gaussian_average
+    from ..core.timing import gaussian_average
 
     if np.ptp(root_across) <= 0.5 * tall:
         across = points[..., 0]
@@ -505,8 +505,8 @@ def fastest_end(motion: Motion, first: int | None = None, *, world: np.ndarray |
     glitch in the capture does not decide. Falls back to the fastest joint of all on a rig
     whose limbs are not found.
     """
-    from .limbs import find_limbs
-    from .tpose import detect_rest_frames
+    from ..analysis.limbs import find_limbs
+    from ..analysis.tpose import detect_rest_frames
 
     world = motion.world_positions() if world is None else world
     world = world[(detect_rest_frames(motion, world) if first is None else first):]
@@ -549,8 +549,8 @@ def render_trajectory(motion: Motion, result: PipelineResult, joint: int | str |
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .config import load_preset
-    from .stages.extrapolate import gaussian_average
+    from ..config import load_preset
+    from ..core.timing import gaussian_average
 
     skeleton = motion.skeleton
     world = motion.world_positions() if world is None else world
@@ -625,13 +625,13 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     stops at `MAX_SECONDS`). The name, the joint and ffmpeg are checked and the target is
     checked (never an input; taken only with ``overwrite``) before the clip is run. ``skin``
     (a `Skin` or a skin file, with ``joint_map`` for joints the pairing misses) is the body drawn,
-    bound to the clip as the GLB's is (`mocap_exaggerate.binding`); default: the capsule body.
+    bound to the clip as the GLB's is (`mocap_exaggerate.rig.binding`); default: the capsule body.
     """
-    from .config import load_preset
-    from .io.bvh import read_bvh
-    from .io.files import atomic_write
-    from .job import check_targets
-    from .pipeline import run
+    from ..config import load_preset
+    from ..io.bvh import read_bvh
+    from ..io.files import atomic_write
+    from ..run.job import check_targets
+    from ..pipeline import run
 
     output = Path(output)
     kind = _kind(output, trajectory)
@@ -643,8 +643,8 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     where = label or (str(source) if inputs else "the clip")
     joint = joint_named(motion.skeleton, trajectory, where) if trajectory is not None else None
     if skin is not None:
-        from .binding import bind_skin
-        from .io.skin import check_skin, load_skin
+        from ..rig.binding import bind_skin
+        from ..io.skin import check_skin, load_skin
 
         skin_label = "skin" if isinstance(skin, Skin) else str(skin)
         skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .motion import Motion
-from .rotations import quat_angle
+from ..core.motion import Motion
+from ..core.rotations import quat_angle
 
 __all__ = ["detect_rest_frames", "REST_POSE_MAX_ANGLE", "JUMP_FACTOR"]
 

@@ -26,16 +26,16 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from .config import DEFAULT_PRESET, PipelineConfig, load_preset
-from .errors import ConfigError
-from .io.bvh import iter_bvh, read_bvh, read_source
-from .io.files import OutputExistsError, OutputSet, remove_stale_temporaries, same_file
+from ..config import DEFAULT_PRESET, PipelineConfig, load_preset
+from ..core.errors import ConfigError
+from ..io.bvh import iter_bvh, read_bvh, read_source
+from ..io.files import OutputExistsError, OutputSet, remove_stale_temporaries, same_file
 from .outputs import file_digest
-from .limbs import find_limbs
-from .motion import Motion
-from .pipeline import PipelineResult, run
-from .skinning import Skin
-from .tpose import detect_rest_frames
+from ..analysis.limbs import find_limbs
+from ..core.motion import Motion
+from ..pipeline import PipelineResult, run
+from ..rig.skinning import Skin
+from ..analysis.tpose import detect_rest_frames
 
 __all__ = ["JobRecord", "convert", "output_paths", "check_name", "check_targets", "check_output_set", "describe",
            "parameters_digest"]
@@ -132,20 +132,20 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
         if value is None:
             return None
         if not isinstance(value, Skin):
-            from .io.skin import load_skin
+            from ..io.skin import load_skin
 
             value = load_skin(value)
         arrays = [np.ascontiguousarray(a).tobytes() for a in (value.vertices, value.faces, value.joints, value.weights)]
         names = json.dumps([list(value.joint_names), {k: np.asarray(v).tolist() for k, v in sorted(value.bind.items())}])
         return file_digest(arrays + [names.encode("utf-8")])
 
-    from . import __version__
+    from .. import __version__
 
     fields = {"version": __version__, "preset": preset, "config": config.to_dict(), "glb": bool(glb),
               "units": units, "influences": int(influences), "skin": skin_content(skin),
               "path_file": file_digest(Path(path_file).read_bytes()) if path_file is not None else None}
     if joint_map is not None:  # only when given: digests of runs without one stay what they were
-        from .binding import read_joint_map
+        from ..rig.binding import read_joint_map
 
         fields["joint_map"] = joint_map if isinstance(joint_map, dict) else read_joint_map(joint_map)
     return file_digest(json.dumps(fields, sort_keys=True, default=str).encode("utf-8"))
@@ -198,7 +198,7 @@ def convert(
     overwrite : replace outputs that exist (an input is never replaced)
     glb : also write the skinned GLB and the re-weighted skin
     skin : a `Skin` or a skin file for the GLB (default: a body grown from the skeleton); one made
-        for another rig is bound to the clip (`mocap_exaggerate.binding`)
+        for another rig is bound to the clip (`mocap_exaggerate.rig.binding`)
     joint_map : clip joint -> skin joint pairs for that binding (or a joint map file), for joints
         the automatic pairing misses
     units, influences : the GLB's units (``auto``, ``cm``, ...) and joints per vertex (4 or 8)
@@ -241,18 +241,18 @@ def convert(
     retired = [path for path in retired if path.exists()]
     check_targets({**targets, **{f"old {p.suffix}": p for p in retired}}, inputs, overwrite)
     if glb and not to_stream:
-        from .io.gltf import unit_scale
+        from ..io.gltf import unit_scale
 
         unit_scale(units, 1.0)  # a bad unit is refused before anything runs
         if influences not in (4, 8):
             raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
 
-    from .io.skin import check_skin, load_skin
-    from .io.trails import read_trails
+    from ..io.skin import check_skin, load_skin
+    from ..io.trails import read_trails
 
     paths = read_trails(path_file) if path_file is not None else None
     if joint_map is not None and not isinstance(joint_map, dict):
-        from .binding import read_joint_map
+        from ..rig.binding import read_joint_map
 
         joint_map = read_joint_map(joint_map)
     skin_label = "skin" if skin is None or isinstance(skin, Skin) else str(skin)
@@ -270,7 +270,7 @@ def convert(
     timings["read"] = time.perf_counter() - started
     binding = None
     if skin is not None and glb and not to_stream:  # bound before the run: a skin that will not bind costs nothing
-        from .binding import bind_skin
+        from ..rig.binding import bind_skin
 
         try:
             skin, binding = bind_skin(skin, motion.skeleton, joint_map)
@@ -310,7 +310,7 @@ def convert(
         if not to_stream:
             outputs["pipeline"] = written.add(targets["pipeline"], config.to_toml().encode("utf-8"))
         if trails is not None:
-            from .io.trails import format_trails
+            from ..io.trails import format_trails
 
             outputs["trails"] = written.add(targets["trails"], format_trails(
                 result.stretch.trails if result.stretch else [], source=label, fps=motion.fps))
@@ -418,7 +418,7 @@ def describe(source: Source, *, fps: float | None = None, limbs: bool = False, g
     if contacts:
         data["contacts"] = clip_contacts(motion)
     if groups:
-        from .stages.subjoints import build_hierarchy
+        from ..stages.subjoints import build_hierarchy
 
         hierarchy = build_hierarchy(skeleton)
         data["groups"] = [[skeleton.names[j] for j in chain] for chain in hierarchy.groups]
@@ -433,8 +433,8 @@ def clip_contacts(motion, config=None) -> dict[str, Any]:
     ``{"floor": {...}, "contacts": {joint: [[start, end], ...]}}`` with frames counted
     in the file (leading rest-pose frames are not searched).
     """
-    from .stages.contacts import ContactConfig, find_contacts, find_effectors
-    from .stages.subjoints import minor_branches, rubber_groups
+    from ..stages.contacts import ContactConfig, find_contacts, find_effectors
+    from ..stages.subjoints import minor_branches, rubber_groups
 
     config = config or ContactConfig()
     skeleton = motion.skeleton

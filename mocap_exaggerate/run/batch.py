@@ -13,7 +13,7 @@ input bytes and the same parameters.
 Example::
 
     from mocap_exaggerate import load_preset
-    from mocap_exaggerate.batch import BatchOptions, find_clips, run_batch
+    from mocap_exaggerate.run.batch import BatchOptions, find_clips, run_batch
 
     clips, problems = find_clips("mocap/")
     results = run_batch(clips, "out/", BatchOptions(load_preset("cartoon")), jobs=2)
@@ -35,9 +35,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable
 
-from .config import PipelineConfig
-from .errors import ConfigError, MocapError
-from .io.files import OutputExistsError
+from ..config import PipelineConfig
+from ..core.errors import ConfigError, MocapError
+from ..io.files import OutputExistsError
 
 __all__ = ["Clip", "BatchOptions", "FileResult", "BatchInterrupted", "find_clips", "glob_regex", "convert_file",
            "run_batch", "run_on_dask", "connect_dask", "check_scheduler", "is_complete", "is_output", "same_outputs", "check_folders", "DEFAULT_GLOB"]
@@ -46,8 +46,8 @@ __all__ = ["Clip", "BatchOptions", "FileResult", "BatchInterrupted", "find_clips
 DEFAULT_GLOB = "**/*.bvh"
 
 #: Modules a worker imports once, before its first clip.
-_PRELOAD = ["mocap_exaggerate.job", "mocap_exaggerate.pipeline", "mocap_exaggerate.outputs",
-            "mocap_exaggerate.io.gltf", "mocap_exaggerate.body", "mocap_exaggerate.skinning"]
+_PRELOAD = ["mocap_exaggerate.run.job", "mocap_exaggerate.pipeline", "mocap_exaggerate.run.outputs",
+            "mocap_exaggerate.io.gltf", "mocap_exaggerate.rig.body", "mocap_exaggerate.rig.skinning"]
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ class BatchOptions:
         input bytes with the same parameters; redo the rest (replacing what they left)
     overwrite : replace existing outputs; without it (or resume) a clip whose outputs
         exist fails, saying so
-    report : also draw each clip's pictures for the batch's report (`mocap_exaggerate.report`)
+    report : also draw each clip's pictures for the batch's report (`mocap_exaggerate.viz.report`)
     """
 
     config: PipelineConfig
@@ -342,7 +342,7 @@ def _not_complete(clip: Clip, out_dir, options: BatchOptions, parameters: str | 
     if problems:
         return f"outputs incomplete ({problems[0]})"
     if options.report:
-        from .report import pictures_current
+        from ..viz.report import pictures_current
 
         if not pictures_current(out_dir, manifest):
             return "its report pictures are missing or were drawn from other outputs"
@@ -404,7 +404,7 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
         return failed(f"internal error, please report it: {type(error).__name__}: {error}")
     notes = ([f"redone: {redo}"] if redo and redo != "no outputs yet" else []) + list(record.notes)
     if options.report:
-        from .report import write_pictures
+        from ..viz.report import write_pictures
 
         warnings = list(record.warnings)
         try:  # the outputs are written and sound: a picture that cannot be drawn is a warning, not a failure

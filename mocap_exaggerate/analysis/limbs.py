@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .skeleton import Skeleton
+from ..core.skeleton import Skeleton
 
 __all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints", "limb_length", "standing_up"]
 

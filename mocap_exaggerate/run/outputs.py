@@ -1,6 +1,6 @@
 """What a run turns into: the manifest, the skin bound to the output skeleton, the GLB bytes.
 
-Everything here returns bytes or plain data; `mocap_exaggerate.job` decides
+Everything here returns bytes or plain data; `mocap_exaggerate.run.job` decides
 where they go and writes them.
 """
 
@@ -12,13 +12,13 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
-from .config import PipelineConfig
-from .errors import ConfigError
-from .io.bvh import written_positions
-from .motion import Motion
-from .pipeline import PipelineResult
-from .skinning import Skin, top_influences
+from .. import __version__
+from ..config import PipelineConfig
+from ..core.errors import ConfigError
+from ..io.bvh import written_positions
+from ..core.motion import Motion
+from ..pipeline import PipelineResult
+from ..rig.skinning import Skin, top_influences
 
 __all__ = ["file_digest", "manifest", "output_thickness", "base_skin", "output_skin", "make_glb", "glb_files"]
 
@@ -141,15 +141,15 @@ THICKNESS = (0.5, 2.0)
 def base_skin(motion: Motion, result: PipelineResult, skin: Skin | None = None,
               joint_map: dict[str, str] | None = None) -> Skin:
     """The skin on the clip's own joints in its rest pose: ``skin`` bound to the clip
-    (`mocap_exaggerate.binding.bind_skin`, with ``joint_map`` for the pairs it misses; as it is
+    (`mocap_exaggerate.rig.binding.bind_skin`, with ``joint_map`` for the pairs it misses; as it is
     when it already is), or the default body."""
     skeleton = motion.skeleton
     hierarchy = result.hierarchy
     if skin is None:
-        from .body import default_skin
+        from ..rig.body import default_skin
 
         return default_skin(skeleton, hierarchy.rigid if hierarchy is not None else None)
-    from .binding import bind_skin
+    from ..rig.binding import bind_skin
 
     return bind_skin(skin, skeleton, joint_map)[0]
 
@@ -158,10 +158,10 @@ def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: 
     """``skin`` (on the clip's joints) bound to the output skeleton, with at most ``influences`` per vertex.
 
     On the rubber skeleton the weights are redistributed onto the sub-joints
-    (`mocap_exaggerate.skinning.reweight`); on the original one the strongest
+    (`mocap_exaggerate.rig.skinning.reweight`); on the original one the strongest
     influences are kept.
     """
-    from .skinning import reweight
+    from ..rig.skinning import reweight
 
     if influences not in (4, 8):
         raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
@@ -187,19 +187,19 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
     """As `make_glb`, with the GLB as a list of pieces (no copy of a long clip's animation into one blob).
 
     motion : the captured clip the run started from
-    skin : a character (bound to the clip here when it is not yet, `mocap_exaggerate.binding`;
+    skin : a character (bound to the clip here when it is not yet, `mocap_exaggerate.rig.binding`;
         ``joint_map`` for the pairs the binding misses), or None for the default body grown
         from the skeleton
     Joints are scaled by `output_thickness` (kept volume) unless the run's ``output.preserve_volume`` is off.
     """
-    from .io.gltf import glb_pieces, unit_scale
-    from .io.skin import npz_bytes
+    from ..io.gltf import glb_pieces, unit_scale
+    from ..io.skin import npz_bytes
 
     if influences not in (4, 8):
         raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
     scale, how = unit_scale(units, motion.skeleton.height())
     bound = output_skin(motion, result, base_skin(motion, result, skin, joint_map), influences)
-    from .limbs import standing_up
+    from ..analysis.limbs import standing_up
 
     step = max(motion.num_frames // 64, 1)  # a sample of the clip tells which way is up
     up = standing_up(motion.skeleton, motion.slice(slice(None, None, step)).world_positions())

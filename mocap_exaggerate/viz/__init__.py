@@ -1,0 +1,1 @@
+"""Pictures: still and animated previews (`preview`) and the batch's HTML report (`report`)."""
