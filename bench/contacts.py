@@ -35,7 +35,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from common import FPS, cell, run_bench
 
 from mocap_exaggerate import load_bvh, load_preset

@@ -17,12 +17,11 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-
 from common import FPS, cell, run_bench
 
 from mocap_exaggerate import load_bvh, load_preset
-from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.analysis.quality import motion_quality
+from mocap_exaggerate.pipeline import run
 
 
 def measure(path: Path, preset: str, config=None) -> dict:

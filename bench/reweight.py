@@ -8,14 +8,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from throughput import best_of as best  # same folder: run as python bench/reweight.py
 
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.skin import load_skin
-from mocap_exaggerate.rig.skinning import Skin
 from mocap_exaggerate.rig.body import default_skin
-from mocap_exaggerate.rig.skinning import reweight
+from mocap_exaggerate.rig.skinning import Skin, reweight
 from mocap_exaggerate.stages.subjoints import build_hierarchy
-from throughput import best_of as best  # same folder: run as python bench/reweight.py
 
 ROOT = Path(__file__).resolve().parent.parent
 SKIN = ROOT.parent / "shared" / "data" / "skin"

@@ -206,9 +206,9 @@ def measure_body(skin, skeleton, rotations: np.ndarray, positions: np.ndarray, t
     """Every figure of one posed body: ``skin`` bound to ``skeleton`` (its rest = the bind pose),
     posed by world ``rotations`` (F, J, 4), ``positions`` (F, J, 3) and ``thickness`` (F, J) or None;
     ``carried`` (J,): the joints (and links ending at them) the distance figures measure from."""
-    from mocap_exaggerate.core.rotations import quat_to_matrix
-
     from scipy.sparse import csr_matrix, identity, kron, vstack
+
+    from mocap_exaggerate.core.rotations import quat_to_matrix
 
     frames, joints = positions.shape[:2]
     rest = skeleton.rest_positions()
@@ -317,11 +317,11 @@ def makehuman():
 def measure_rig(task: tuple) -> list[dict]:
     """Rows (one per setting x body) of one clip."""
     path, rig, settings, bodies, cut, step = task
+    from mocap_exaggerate.io.bvh import read_bvh
+    from mocap_exaggerate.pipeline import run
     from mocap_exaggerate.rig.binding import bind_skin
     from mocap_exaggerate.rig.body import default_skin
-    from mocap_exaggerate.io.bvh import read_bvh
     from mocap_exaggerate.run.outputs import base_skin, output_skin, output_thickness
-    from mocap_exaggerate.pipeline import run
     from mocap_exaggerate.stages.subjoints import minor_branches
 
     motion, _ = read_bvh(Path(path), fps=FPS.get(Path(path).name))

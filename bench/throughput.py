@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.config import load_preset, resolve_config
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.stages.subjoints import SubjointConfig, build_hierarchy
 

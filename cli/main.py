@@ -12,17 +12,18 @@ import logging
 import math
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import click
 
 # Only light modules at import time: `--help` must not wait for SciPy, trimesh or pygltflib.
 from mocap_exaggerate import __version__
-from mocap_exaggerate.run.batch import DEFAULT_GLOB
 from mocap_exaggerate.config import DEFAULT_PRESET, preset_description, preset_names, read_config_text, resolve_config
 from mocap_exaggerate.core.errors import MocapError
 from mocap_exaggerate.io.files import OutputExistsError
+from mocap_exaggerate.run.batch import DEFAULT_GLOB
 from mocap_exaggerate.stages.contacts import parse_target
 from mocap_exaggerate.stages.stretch import parse_stretch
 

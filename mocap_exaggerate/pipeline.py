@@ -15,26 +15,36 @@ from __future__ import annotations
 
 import functools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
+from .analysis.limbs import LIMB_NAMES, find_limbs, limb_joints
+from .analysis.tpose import detect_rest_frames
 from .config import DEFAULT_PRESET, InputConfig, PipelineConfig, load_preset
 from .core.errors import ConfigError
-from .analysis.limbs import LIMB_NAMES, find_limbs, limb_joints
 from .core.motion import Motion
 from .core.skeleton import Skeleton
+from .core.timing import parse_duration, smootherstep
 from .stages.contacts import ContactConfig, StretchKey, TargetSpec, constrain
 from .stages.correct import CorrectReport, accent_stretch, correct, keep_bends
 from .stages.extrapolate import extrapolate
-from .core.timing import parse_duration, smootherstep
 from .stages.orient import incoming_joint, motion_from_world, recover_orientations
 from .stages.springs import simulate_springs, spring_links, stable_link_stiffness, substeps_for
 from .stages.stretch import StretchResult, StretchSpec, apply_stretches, find_strikes, overlapping, strike_scale
-from .stages.subjoints import (SubjointConfig, SubjointHierarchy, build_hierarchy, even_out, link_starts,
-                               minor_branches, position_subjoints, riders, rubber_groups)
-from .analysis.tpose import detect_rest_frames
+from .stages.subjoints import (
+    SubjointConfig,
+    SubjointHierarchy,
+    build_hierarchy,
+    even_out,
+    link_starts,
+    minor_branches,
+    position_subjoints,
+    riders,
+    rubber_groups,
+)
 
 __all__ = [
     "State",

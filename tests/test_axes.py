@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from mocap_exaggerate.config import load_preset, resolve_config
-from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.core.motion import Motion
-from mocap_exaggerate.run.outputs import make_glb
-from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.core.rotations import quat_mul, quat_rotate
 from mocap_exaggerate.core.skeleton import Skeleton
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
+from mocap_exaggerate.pipeline import run
+from mocap_exaggerate.run.outputs import make_glb
 
 from .helpers import SAMPLE_DIR, glb_joint_positions, shared, shared_clip_params
 

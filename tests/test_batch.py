@@ -112,7 +112,7 @@ def test_a_mixed_folder_converts_the_good_lists_the_bad_and_exits_1(tmp_path):
     for name, says in (("empty.bvh", "empty"), ("picture.bvh", "not a BVH file"), ("broken.bvh", "broken.bvh:"),
                        ("gone.bvh", "nowhere.bvh, which does not exist")):
         assert by_name[name]["status"] == "failed" and says in by_name[name]["error"], by_name[name]
-        assert f"failed: " in done.stderr and says in done.stderr
+        assert "failed: " in done.stderr and says in done.stderr
     assert by_name["again"]["status"] == "skipped"
     assert "converted       3" in done.stderr and "failed          4" in done.stderr
 
@@ -334,8 +334,8 @@ def test_resume_knows_a_skin_by_its_content(tmp_path):
     """The skin is part of the parameters: the same skin keeps finished clips, another redoes them."""
     import numpy as np
 
-    from mocap_exaggerate.rig.body import default_skin
     from mocap_exaggerate.io.bvh import read_bvh
+    from mocap_exaggerate.rig.body import default_skin
 
     folder = tmp_path / "in"
     folder.mkdir()

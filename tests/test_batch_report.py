@@ -318,8 +318,8 @@ def test_a_refused_scheduler_leaves_no_output_folder_behind(tmp_path):
 def test_a_scheduler_without_workers_is_said_not_waited_on_forever(monkeypatch):
     from distributed import LocalCluster
 
-    from mocap_exaggerate.run import batch
     from mocap_exaggerate.core.errors import ConfigError
+    from mocap_exaggerate.run import batch
 
     monkeypatch.setattr(batch, "WAIT_FOR_WORKERS", 1.0)
     with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:

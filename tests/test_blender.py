@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.config import load_preset
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.pipeline import run
 
 from .helpers import ROOT, SAMPLE_DIR

@@ -112,8 +112,8 @@ def captured_row(motion, bound, meters: float, up: tuple[int, float]) -> Row:
 
 def output_row(motion, config, skin=None) -> Row:
     """A run's GLB (``make_glb``, with ``skin`` or the default body) and its skin on the output skeleton."""
-    from mocap_exaggerate.run.outputs import base_skin, make_glb, output_skin, output_thickness
     from mocap_exaggerate.pipeline import run
+    from mocap_exaggerate.run.outputs import base_skin, make_glb, output_skin, output_thickness
     from mocap_exaggerate.stages.subjoints import minor_branches
 
     result = run(motion, config)
@@ -203,12 +203,12 @@ def clips(tmp_path_factory) -> dict[str, dict]:
     """Per clip: its rows (the MakeHuman body at every setting, the default body at looney on
     `DEFAULT_BODY_CLIPS`), the sampled frames, ``bench/skin.py``'s figures over every frame
     (``whole``) and on the sample (``sample``), and what Blender saw (``seen``)."""
-    from mocap_exaggerate.rig.binding import bind_skin
+    from mocap_exaggerate.analysis.limbs import standing_up
     from mocap_exaggerate.config import load_preset
     from mocap_exaggerate.io.bvh import read_bvh
     from mocap_exaggerate.io.gltf import unit_scale
     from mocap_exaggerate.io.skin import load_skin
-    from mocap_exaggerate.analysis.limbs import standing_up
+    from mocap_exaggerate.rig.binding import bind_skin
 
     paths = {key: shared(name) for key, name in CLIPS.items()}
     if not SKIN_FILE.exists():
@@ -254,8 +254,8 @@ def test_blender_deforms_our_glbs_as_our_own_posing_does(clip, clips):
     """Every GLB of the clip, in Blender: our vertices in our order and our edges; its bones at rest
     and at every sampled frame and its mesh at the row's worst frame where our own posing puts them (1e-4 of the
     height, in the GLB's metres and Y-up axes); and the 2x shares on the sample equal ours."""
-    from mocap_exaggerate.io.gltf import UPRIGHT
     from mocap_exaggerate.core.rotations import quat_rotate
+    from mocap_exaggerate.io.gltf import UPRIGHT
 
     got = clips[clip]
     turn = quat_rotate(np.array(UPRIGHT[(int(got["up"][0]), float(got["up"][1]))]), np.eye(3)).T

@@ -136,12 +136,12 @@ def test_layout_variants_read():
     # "{" on the name line, a name with spaces, a leaf without End Site, position channels on a
     # non-root joint, scientific notation, CRLF, tabs, TAB after Frames:, ".1" frame time.
     text = (
-        "HIERARCHY\r\nROOT Bip01 Pelvis {\r\n\tOFFSET 0 0 0\r\n"
-        "\tCHANNELS 3 Xposition Yposition Zposition\r\n"
-        "\tJOINT Arm\n\t{\n\t\tOFFSET 1e0 0 -0.00000\n\t\tCHANNELS 6 Yrotation Xposition Zrotation Yposition Xrotation Zposition\n\t}\n"
-        "}\r\nMOTION\r\nFrames:\t1\r\nFrame Time: .1\r\n"
-        "1 2 3 90 4 0 5 0 6\r\n"
-    ).encode()
+        b"HIERARCHY\r\nROOT Bip01 Pelvis {\r\n\tOFFSET 0 0 0\r\n"
+        b"\tCHANNELS 3 Xposition Yposition Zposition\r\n"
+        b"\tJOINT Arm\n\t{\n\t\tOFFSET 1e0 0 -0.00000\n\t\tCHANNELS 6 Yrotation Xposition Zrotation Yposition Xrotation Zposition\n\t}\n"
+        b"}\r\nMOTION\r\nFrames:\t1\r\nFrame Time: .1\r\n"
+        b"1 2 3 90 4 0 5 0 6\r\n"
+    )
     motion, _ = read_bvh(text)
     assert motion.skeleton.names == ("Bip01 Pelvis", "Arm")
     assert motion.skeleton.rotation_order(1) == "YZX"

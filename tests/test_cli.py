@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mocap_exaggerate_cli.main import cli
 from mocap_exaggerate.io.bvh import read_bvh
+from mocap_exaggerate_cli.main import cli
 
 from .helpers import MALFORMED
 

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from mocap_exaggerate import load_preset
+from mocap_exaggerate.analysis.limbs import find_limbs
+from mocap_exaggerate.analysis.tpose import detect_rest_frames
 from mocap_exaggerate.config import PipelineConfig
 from mocap_exaggerate.io.bvh import read_bvh
-from mocap_exaggerate.analysis.limbs import find_limbs
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.stages.contacts import (
     ContactConfig,
@@ -26,7 +27,6 @@ from mocap_exaggerate.stages.contacts import (
     two_bone_ik,
 )
 from mocap_exaggerate.stages.stretch import StretchSpec
-from mocap_exaggerate.analysis.tpose import detect_rest_frames
 
 from .helpers import shared
 

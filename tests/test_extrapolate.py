@@ -2,9 +2,9 @@ import numpy as np
 import pytest
 
 from mocap_exaggerate.core.errors import ConfigError
+from mocap_exaggerate.core.timing import gaussian_average, parse_duration
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.stages.extrapolate import ExtrapolateConfig, extrapolate
-from mocap_exaggerate.core.timing import gaussian_average, parse_duration
 
 
 def test_omega_one_is_the_identity(sample_clip):

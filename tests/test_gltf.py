@@ -13,17 +13,15 @@ import pygltflib
 import pytest
 import trimesh
 
-
-from mocap_exaggerate.io.gltf import unit_scale
-from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.config import load_preset, resolve_config
-from mocap_exaggerate.io.skin import load_skin
-from mocap_exaggerate.run.outputs import make_glb, output_thickness
-from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.rig.skinning import Skin
 from mocap_exaggerate.core.rotations import quat_mul, quat_rotate
+from mocap_exaggerate.io.bvh import read_bvh
+from mocap_exaggerate.io.gltf import unit_scale
+from mocap_exaggerate.io.skin import load_skin
+from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.rig.body import default_skin
-from mocap_exaggerate.rig.skinning import reweight, subjoint_bind_positions
+from mocap_exaggerate.rig.skinning import Skin, reweight, subjoint_bind_positions
+from mocap_exaggerate.run.outputs import make_glb, output_thickness
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 
 from .helpers import ROOT, SHARED_BVH, all_clip_params, shared, skinned_vertices

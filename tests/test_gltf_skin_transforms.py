@@ -9,17 +9,17 @@ import numpy as np
 import pygltflib as gl
 import pytest
 
+from mocap_exaggerate.analysis.limbs import standing_up
 from mocap_exaggerate.config import resolve_config
 from mocap_exaggerate.core.errors import InputError
+from mocap_exaggerate.core.motion import Motion
+from mocap_exaggerate.core.rotations import quat_mul, quat_rotate, quat_to_matrix
+from mocap_exaggerate.core.skeleton import Skeleton
 from mocap_exaggerate.io.bvh import format_bvh, load_bvh
 from mocap_exaggerate.io.gltf import UPRIGHT, unit_scale
 from mocap_exaggerate.io.skin import load_gltf_skin, load_skin
-from mocap_exaggerate.analysis.limbs import standing_up
-from mocap_exaggerate.core.motion import Motion
-from mocap_exaggerate.run.outputs import make_glb
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.core.rotations import quat_mul, quat_rotate, quat_to_matrix
-from mocap_exaggerate.core.skeleton import Skeleton
+from mocap_exaggerate.run.outputs import make_glb
 
 from .helpers import SAMPLE_DIR
 

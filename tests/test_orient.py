@@ -5,14 +5,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.config import load_preset, resolve_config
-from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.core.rotations import quat_angle, quat_between, quat_rotate, quat_slerp
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
+from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.stages.orient import _fit_turn
 
 from .helpers import SAMPLE_DIR
-
 
 
 def test_quat_between_is_the_smallest_rotation():

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from mocap_exaggerate import exaggerate, load_bvh
-from mocap_exaggerate.core.errors import ConfigError
-from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.analysis.limbs import _side_from_name, find_limbs
-from mocap_exaggerate.config import PipelineConfig, load_preset, preset_names, resolve_config
-from mocap_exaggerate.pipeline import prepare, resolve_weights, run
-from mocap_exaggerate.core.rotations import quat_angle
 from mocap_exaggerate.analysis.tpose import detect_rest_frames
+from mocap_exaggerate.config import PipelineConfig, load_preset, preset_names, resolve_config
+from mocap_exaggerate.core.errors import ConfigError
+from mocap_exaggerate.core.rotations import quat_angle
+from mocap_exaggerate.io.bvh import format_bvh, read_bvh
+from mocap_exaggerate.pipeline import prepare, resolve_weights, run
 
 from .helpers import SAMPLE_DIR as ROOT_SAMPLE
 from .helpers import all_clip_params, shared, shared_clip_params

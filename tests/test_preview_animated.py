@@ -18,8 +18,15 @@ from mocap_exaggerate import load_preset
 from mocap_exaggerate.core.errors import ConfigError
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.viz.preview import (animation_frames, gif_durations, pose_bodies, preview_window, render_gif,
-                                      view_limits, write_preview)
+from mocap_exaggerate.viz.preview import (
+    animation_frames,
+    gif_durations,
+    pose_bodies,
+    preview_window,
+    render_gif,
+    view_limits,
+    write_preview,
+)
 from mocap_exaggerate_cli.main import cli
 
 from .helpers import SAMPLE_DIR, shared

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from mocap_exaggerate import load_preset
+from mocap_exaggerate.analysis.quality import motion_quality
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.analysis.quality import motion_quality
 
 from .helpers import shared_clip_params
 

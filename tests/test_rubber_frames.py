@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from mocap_exaggerate.config import resolve_config
+from mocap_exaggerate.core.skeleton import Skeleton
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.core.skeleton import Skeleton
 from mocap_exaggerate.rig.skinning import Skin, reweight, subjoint_bind_positions
 from mocap_exaggerate.stages.subjoints import SubjointConfig, build_hierarchy, link_starts
 

@@ -5,9 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mocap_exaggerate.config import load_preset
 from mocap_exaggerate.core.errors import ConfigError
 from mocap_exaggerate.io.bvh import read_bvh
-from mocap_exaggerate.config import load_preset
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.stages.springs import (
     DAMPING_RANGE,

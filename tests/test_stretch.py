@@ -6,11 +6,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mocap_exaggerate_cli.main import cli
-from mocap_exaggerate.core.errors import ConfigError
-from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.analysis.limbs import find_limbs
 from mocap_exaggerate.config import PipelineConfig, resolve_config
+from mocap_exaggerate.core.errors import ConfigError
+from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.stages.stretch import (
     AutoStretchConfig,
@@ -23,6 +22,7 @@ from mocap_exaggerate.stages.stretch import (
     release_curve,
     solve_effective_scale,
 )
+from mocap_exaggerate_cli.main import cli
 
 from .helpers import shared
 

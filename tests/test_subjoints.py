@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from mocap_exaggerate.core.errors import ConfigError
-from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.core.skeleton import Skeleton
+from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.stages.subjoints import (
     SubjointConfig,
     bezier_points,

@@ -29,9 +29,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .limbs import find_limbs
 from ..core.motion import Motion
 from ..core.rotations import quat_angle
+from .limbs import find_limbs
 
 __all__ = ["motion_quality", "turn_degrees", "still_frames", "STRETCHED"]
 

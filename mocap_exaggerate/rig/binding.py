@@ -43,8 +43,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.errors import ConfigError, InputError
 from ..analysis.limbs import find_limbs
+from ..core.errors import ConfigError, InputError
 from ..core.rotations import quat_between, quat_to_matrix
 from ..core.skeleton import Skeleton
 from .skinning import Skin, top_influences

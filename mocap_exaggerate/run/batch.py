@@ -26,14 +26,14 @@ import json
 import os
 import re
 import signal
-import time
 import threading
+import time
+from collections.abc import Callable, Iterable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable
 
 from ..config import PipelineConfig
 from ..core.errors import ConfigError, MocapError

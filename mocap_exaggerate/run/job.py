@@ -26,16 +26,16 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
+from ..analysis.limbs import find_limbs
+from ..analysis.tpose import detect_rest_frames
 from ..config import DEFAULT_PRESET, PipelineConfig, load_preset
 from ..core.errors import ConfigError
+from ..core.motion import Motion
 from ..io.bvh import iter_bvh, read_bvh, read_source
 from ..io.files import OutputExistsError, OutputSet, remove_stale_temporaries, same_file
-from .outputs import file_digest
-from ..analysis.limbs import find_limbs
-from ..core.motion import Motion
 from ..pipeline import PipelineResult, run
 from ..rig.skinning import Skin
-from ..analysis.tpose import detect_rest_frames
+from .outputs import file_digest
 
 __all__ = ["JobRecord", "convert", "output_paths", "check_name", "check_targets", "check_output_set", "describe",
            "parameters_digest"]

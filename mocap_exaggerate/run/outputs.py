@@ -15,8 +15,8 @@ import numpy as np
 from .. import __version__
 from ..config import PipelineConfig
 from ..core.errors import ConfigError
-from ..io.bvh import written_positions
 from ..core.motion import Motion
+from ..io.bvh import written_positions
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin, top_influences
 

@@ -3,9 +3,9 @@
 `mocap_exaggerate.pipeline` declares the order they run in.
 """
 
+from ..core.timing import gaussian_average, parse_duration
 from .correct import CorrectConfig, CorrectReport, correct, stretch_error
 from .extrapolate import ExtrapolateConfig, extrapolate
-from ..core.timing import gaussian_average, parse_duration
 from .orient import motion_from_world, recover_orientations
 from .springs import SpringConfig, simulate_springs
 from .subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy, position_subjoints

@@ -39,8 +39,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..core.errors import ConfigError, check_flag, check_number
 from ..analysis.limbs import Limb
+from ..core.errors import ConfigError, check_flag, check_number
 from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
 from ..core.skeleton import Skeleton
 from ..core.timing import check_duration, parse_duration, parse_frame, smootherstep, spread_max

@@ -27,8 +27,7 @@ import numpy as np
 
 from ..core.kinematics import local_from_world
 from ..core.motion import Motion
-from ..core.rotations import (quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow,
-                         quat_rotate, quat_slerp)
+from ..core.rotations import quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow, quat_rotate, quat_slerp
 from ..core.timing import smootherstep, step_gain
 from .subjoints import SubjointHierarchy, link_starts, riders
 

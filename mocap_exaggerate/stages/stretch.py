@@ -24,8 +24,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core.errors import ConfigError, check_number
 from ..analysis.limbs import limb_length
+from ..core.errors import ConfigError, check_number
 from ..core.rotations import quat_between, quat_rotate
 from ..core.timing import parse_duration, parse_frame
 

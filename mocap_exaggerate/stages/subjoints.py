@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.errors import ConfigError, check_flag
 from ..analysis.limbs import find_limbs
+from ..core.errors import ConfigError, check_flag
 from ..core.skeleton import POSITION_CHANNELS, Skeleton
 
 __all__ = [

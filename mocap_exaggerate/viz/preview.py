@@ -25,11 +25,11 @@ import numpy as np
 
 from ..core.errors import ConfigError, check_number
 from ..core.motion import Motion
-from ..run.outputs import base_skin, output_skin, output_thickness
-from ..pipeline import PipelineResult
 from ..core.rotations import quat_rotate
 from ..core.skeleton import Skeleton
+from ..pipeline import PipelineResult
 from ..rig.skinning import Skin
+from ..run.outputs import base_skin, output_skin, output_thickness
 
 __all__ = ["pose_skin", "pose_bodies", "PosedBodies", "view_limits", "render_preview", "telling_frames", "lined_up",
            "write_preview", "fastest_end", "render_trajectory", "telling_window", "preview_window",
@@ -630,8 +630,8 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     from ..config import load_preset
     from ..io.bvh import read_bvh
     from ..io.files import atomic_write
-    from ..run.job import check_targets
     from ..pipeline import run
+    from ..run.job import check_targets
 
     output = Path(output)
     kind = _kind(output, trajectory)
@@ -643,8 +643,8 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     where = label or (str(source) if inputs else "the clip")
     joint = joint_named(motion.skeleton, trajectory, where) if trajectory is not None else None
     if skin is not None:
-        from ..rig.binding import bind_skin
         from ..io.skin import check_skin, load_skin
+        from ..rig.binding import bind_skin
 
         skin_label = "skin" if isinstance(skin, Skin) else str(skin)
         skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
