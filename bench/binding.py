@@ -42,7 +42,7 @@ def main() -> None:
     for path in clips:
         motion, _ = read_bvh(path, fps=FPS.get(path.name))
         skeleton = motion.skeleton
-        seconds = best_of(lambda: bind_skin(body, skeleton), 3)
+        seconds = best_of(lambda skeleton=skeleton: bind_skin(body, skeleton), 3)
         bound, binding = bind_skin(body, skeleton)
         frames = np.linspace(0, motion.num_frames - 1, min(12, motion.num_frames)).astype(int)
         rotations, positions = motion.forward_kinematics()

@@ -43,7 +43,7 @@ def table(preset: str, rows: list[dict]) -> None:
     for r in rows:
         s = r["stretch"]
 
-        def limb_pair(a, b):
+        def limb_pair(a, b, s=s):
             parts = [s[k] for k in (a, b) if k in s]
             if not parts:
                 return "-"

@@ -397,7 +397,7 @@ def targets(rows: list[dict]) -> dict[str, dict]:
     by = {(r["rig"], r["setting"], r["body"]): r for r in rows if "error" not in r}
     out = {}
     for rig in dict.fromkeys(r["rig"] for r in rows):
-        def share(setting):
+        def share(setting, rig=rig):
             r = by.get((rig, setting, "makehuman"))
             return None if r is None else 100 * r["over_2"]
 

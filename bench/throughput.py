@@ -35,7 +35,7 @@ def tiled(path: Path, frames: int, folder: Path) -> Path:
     data = path.read_bytes()
     motion, _ = read_bvh(data)
     head, _, body = data.partition(b"MOTION")
-    lines = [l for l in body.splitlines()[3:] if l.strip()][: motion.num_frames]
+    lines = [line for line in body.splitlines()[3:] if line.strip()][: motion.num_frames]
     rows = (lines * (frames // len(lines) + 1))[:frames]
     frame_time = np.format_float_positional(motion.frame_time, trim="-")
     out = folder / f"tiled_{frames}.bvh"

@@ -633,35 +633,57 @@ def _writable(folder: Path) -> None:
 @folder_arguments
 @output_options
 @pipeline_options
+@click.option("--print0", "print0", is_flag=True,
+              help="End each command with a NUL byte instead of a newline, for 'xargs -0' (any file name).")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print a JSON list of {input, output, name, argv} instead, for tools that take one.")
 @verbosity_options
 @_fail_cleanly
 def plan(in_dir: Path, out_dir: Path, pattern: str, overwrite: bool, skin_path: Path | None, units: str,
-         influences: str, write_glb: bool, **options) -> None:
+         influences: str, write_glb: bool, print0: bool, as_json: bool, **options) -> None:
     """Print one self-contained 'exaggerate' command per clip under IN_DIR, for a farm's job list.
 
     Each line converts one clip into the place 'batch' would put it, with the
-    options given here (paths made absolute); feed the lines to Deadline,
-    OpenCue, a Slurm array or xargs. Nothing is converted or written.
+    options given here (paths made absolute, quoted for the shell); feed the
+    lines to Deadline, OpenCue, a Slurm array or xargs. Nothing is converted
+    or written. A clip whose path holds a line break cannot be one line: it is
+    left out with a warning unless --print0 or --json is given.
 
     \b
     Examples:
       mocap-exaggerate plan mocap/ /farm/out --preset looney > jobs.txt
-      mocap-exaggerate plan mocap/ out/ | xargs -P 8 -I{} sh -c {}
+      sed -n "${SLURM_ARRAY_TASK_ID}p" jobs.txt | sh          # one Slurm array task
+      mocap-exaggerate plan mocap/ out/ --print0 | xargs -0 -n 1 -P 8 sh -c
     """
+    import json
     import shlex
 
+    if print0 and as_json:
+        raise click.UsageError("--print0 and --json are two forms of the same list: give one")
     _batch_options(options, overwrite=overwrite, resume=False, write_glb=write_glb, skin_path=skin_path,
                    units=units, influences=influences,
                    joint_map_path=options.pop("joint_map_path"))  # a bad setting is refused here, not on the farm
     clips, problems = _find_batch_clips(in_dir, out_dir, pattern)
     for problem in problems:
         log.warning("%s: %s", problem.input, problem.error)
-    given = _given_options(click.get_current_context(), exclude={"pattern"})
+    given = _given_options(click.get_current_context(), exclude={"pattern", "print0", "as_json"})
+    jobs = []
     for clip in clips:
         folder = (out_dir / clip.relative.parent).absolute()
-        words = ["mocap-exaggerate", "exaggerate", str(clip.source.absolute()), "-o", str(folder),
-                 "--name", clip.name, *given]
-        click.echo(shlex.join(words))
+        argv = ["mocap-exaggerate", "exaggerate", str(clip.source.absolute()), "-o", str(folder),
+                "--name", clip.name, *given]
+        if not (print0 or as_json) and any("\n" in word or "\r" in word for word in argv):
+            log.warning("%s: its path has a line break, so it cannot be one line of a job list; left out "
+                        "(--print0 or --json list it)", clip.source)
+            continue
+        jobs.append({"input": str(clip.source.absolute()), "output": str(folder), "name": clip.name, "argv": argv})
+    if as_json:
+        click.echo(json.dumps(jobs, indent=1, ensure_ascii=False))
+    else:
+        for job in jobs:
+            click.echo(shlex.join(job["argv"]), nl=not print0)
+            if print0:
+                click.echo("\0", nl=False)
 
 
 def _given_options(ctx: click.Context, exclude: set[str]) -> list[str]:

@@ -77,7 +77,10 @@ def test_reallusion_root_channels_add_to_the_offset(tmp_path):
     dropped = added.world_positions() - replaced.world_positions()
     np.testing.assert_allclose(dropped, np.broadcast_to(added.skeleton.offsets[0], dropped.shape), atol=1e-6)
     source = path.read_text()
-    first_row = lambda text: [float(v) for v in text.split("Frame Time:")[1].splitlines()[1].split()[:3]]
+
+    def first_row(text):
+        return [float(v) for v in text.split("Frame Time:")[1].splitlines()[1].split()[:3]]
+
     # By default the root's channels are its position, the OFFSET replaced: every reader's convention.
     text = format_bvh(added).decode()
     assert first_row(text) == pytest.approx(np.array(first_row(source)) + added.skeleton.offsets[0], abs=1e-5)

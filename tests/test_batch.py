@@ -330,6 +330,72 @@ def test_plan_prints_one_command_per_clip_that_makes_what_batch_makes(tmp_path):
                 == (tmp_path / "batch" / "jumps" / f"jump{suffix}").read_bytes())
 
 
+HOSTILE_NAMES = ["it's [a] dir/jump \"ü\" x.bvh", "run $(touch PWNED) `id` ; *.bvh"]
+
+
+def _hostile_folder(root: Path) -> Path:
+    folder = root / "in dir"
+    for name, clip in zip(HOSTILE_NAMES, (JUMP, RUN)):
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(clip, folder / name)
+    return folder
+
+
+def _farm_env() -> dict:
+    # The farm runs the installed command: the one beside this interpreter.
+    return {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
+
+
+def _made(out: Path) -> list[str]:
+    return sorted(str(p.relative_to(out)) for p in out.rglob("*.bvh"))
+
+
+@pytest.mark.skipif(shutil.which("xargs") is None or shutil.which("sh") is None, reason="needs sh and xargs")
+def test_the_readmes_farm_recipes_work_on_any_path(tmp_path):
+    # Spaces, quotes, brackets, non-ASCII and shell syntax in folder and file names: the xargs
+    # recipe (NUL-separated), one Slurm array task per line through sh, and the JSON argv.
+    folder = _hostile_folder(tmp_path)
+    expected = sorted(HOSTILE_NAMES)
+    env = _farm_env()
+    plan0 = command("plan", folder, tmp_path / "xargs", "--no-glb", "--print0", cwd=tmp_path)
+    assert plan0.returncode == 0 and plan0.stdout.count("\0") == 2, plan0.stderr
+    done = subprocess.run(["xargs", "-0", "-n", "1", "-P", "2", "sh", "-c"], input=plan0.stdout, text=True,
+                          capture_output=True, env=env, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert _made(tmp_path / "xargs") == expected
+    lines = command("plan", folder, tmp_path / "slurm", "--no-glb", cwd=tmp_path)
+    assert lines.returncode == 0 and len(lines.stdout.splitlines()) == 2, lines.stderr
+    (tmp_path / "jobs.txt").write_text(lines.stdout)
+    for task in (1, 2):
+        done = subprocess.run(["sh", "-c", 'sed -n "${SLURM_ARRAY_TASK_ID}p" jobs.txt | sh'], cwd=tmp_path,
+                              env={**env, "SLURM_ARRAY_TASK_ID": str(task)}, capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+    assert _made(tmp_path / "slurm") == expected
+    listed = command("plan", folder, tmp_path / "json", "--no-glb", "--json")
+    for job in json.loads(listed.stdout):
+        assert subprocess.run(job["argv"], env=env, capture_output=True).returncode == 0
+    assert _made(tmp_path / "json") == expected
+    assert not (tmp_path / "PWNED").exists() and not any(tmp_path.rglob("PWNED"))
+    for out in ("xargs", "slurm", "json"):
+        assert (tmp_path / out / "it's [a] dir" / "jump \"ü\" x.bvh").read_bytes() == (
+            tmp_path / "xargs" / "it's [a] dir" / "jump \"ü\" x.bvh").read_bytes()
+
+
+def test_a_path_with_a_line_break_is_left_out_of_a_line_list_and_kept_in_the_others(tmp_path):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    shutil.copy(RUN, folder / "two\nlines.bvh")
+    shutil.copy(JUMP, folder / "jump.bvh")
+    lines = command("plan", folder, tmp_path / "out")
+    assert lines.returncode == 0 and len(lines.stdout.splitlines()) == 1 and "jump.bvh" in lines.stdout
+    assert "line break" in lines.stderr and "--print0" in lines.stderr
+    nul = command("plan", folder, tmp_path / "out", "--print0")
+    assert nul.stdout.count("\0") == 2
+    assert len(json.loads(command("plan", folder, tmp_path / "out", "--json").stdout)) == 2
+    both = command("plan", folder, tmp_path / "out", "--json", "--print0")
+    assert both.returncode == 2 and "give one" in both.stderr and "Traceback" not in both.stderr
+
+
 def test_resume_knows_a_skin_by_its_content(tmp_path):
     """The skin is part of the parameters: the same skin keeps finished clips, another redoes them."""
     import numpy as np

@@ -51,7 +51,7 @@ def test_blender_imports_the_rubber_bvh_where_we_computed_it(clip, tmp_path):
     done = subprocess.run([BPY, str(SCRIPT), str(path), *map(str, frames)], capture_output=True, text=True,
                           timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
-    line = next(l for l in done.stdout.splitlines() if l.startswith("JSON:"))
+    line = next(line for line in done.stdout.splitlines() if line.startswith("JSON:"))
     seen = json.loads(line[5:])
     assert seen["bones"] == result.motion.skeleton.num_joints
     assert seen["frame_range"][1] - seen["frame_range"][0] + 1 == motion.num_frames
@@ -84,7 +84,7 @@ def test_blender_imports_the_glb_and_deforms_the_mesh_as_we_do(clip, tmp_path):
     done = subprocess.run([BPY, str(GLB_SCRIPT), str(path), str(motion.fps), *map(str, frames)],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
-    seen = json.loads(next(l for l in done.stdout.splitlines() if l.startswith("JSON:"))[5:])
+    seen = json.loads(next(line for line in done.stdout.splitlines() if line.startswith("JSON:"))[5:])
     assert seen["bones"] == result.motion.skeleton.num_joints
     assert seen["frame_range"][1] - seen["frame_range"][0] == pytest.approx(motion.num_frames - 1, abs=0.01)
     meters = unit_scale("auto", motion.skeleton.height())[0]
@@ -115,7 +115,7 @@ def test_blender_stands_a_z_up_clip_upright_on_the_floor(tmp_path):
     done = subprocess.run([BPY, str(GLB_SCRIPT), str(record.outputs["glb"]), str(motion.fps), *map(str, frames)],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
-    seen = json.loads(next(l for l in done.stdout.splitlines() if l.startswith("JSON:"))[5:])
+    seen = json.loads(next(line for line in done.stdout.splitlines() if line.startswith("JSON:"))[5:])
     height = motion.skeleton.height() * unit_scale("auto", motion.skeleton.height())[0]
     for frame in map(str, frames):
         heads, mesh = seen["heads"][frame], np.array(seen["meshes"][frame])
@@ -146,7 +146,7 @@ def test_blender_deforms_the_makehuman_body_bound_to_a_clip_along_its_skeleton(c
     done = subprocess.run([BPY, str(GLB_SCRIPT), str(record.outputs["glb"]), str(motion.fps), *map(str, frames)],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
-    seen = json.loads(next(l for l in done.stdout.splitlines() if l.startswith("JSON:"))[5:])
+    seen = json.loads(next(line for line in done.stdout.splitlines() if line.startswith("JSON:"))[5:])
     assert seen["vertices"] > 10_000  # the MakeHuman body, not the capsule body
     for frame in map(str, frames):
         mesh = np.array(seen["meshes"][frame])

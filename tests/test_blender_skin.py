@@ -195,7 +195,7 @@ def run_blender(jobs: list[dict], folder: Path) -> list[dict]:
     listing.write_text(json.dumps(jobs))
     done = subprocess.run([BPY, str(SCRIPT), str(listing)], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(next(l for l in done.stdout.splitlines() if l.startswith("JSON:"))[5:])
+    return json.loads(next(line for line in done.stdout.splitlines() if line.startswith("JSON:"))[5:])
 
 
 @pytest.fixture(scope="module")

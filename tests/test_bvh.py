@@ -138,7 +138,8 @@ def test_layout_variants_read():
     text = (
         b"HIERARCHY\r\nROOT Bip01 Pelvis {\r\n\tOFFSET 0 0 0\r\n"
         b"\tCHANNELS 3 Xposition Yposition Zposition\r\n"
-        b"\tJOINT Arm\n\t{\n\t\tOFFSET 1e0 0 -0.00000\n\t\tCHANNELS 6 Yrotation Xposition Zrotation Yposition Xrotation Zposition\n\t}\n"
+        b"\tJOINT Arm\n\t{\n\t\tOFFSET 1e0 0 -0.00000\n"
+        b"\t\tCHANNELS 6 Yrotation Xposition Zrotation Yposition Xrotation Zposition\n\t}\n"
         b"}\r\nMOTION\r\nFrames:\t1\r\nFrame Time: .1\r\n"
         b"1 2 3 90 4 0 5 0 6\r\n"
     )

@@ -151,8 +151,11 @@ def test_input_convention_writes_an_iclone_clip_back_as_iclone_wrote_it(written)
         assert worst(again.world_positions(), case) < 1e-5
         standard, _ = read_bvh(case.path)
         assert np.abs(again.world_positions() - standard.world_positions()).max() < 1e-5 * case.height
+
         # The root's first channels: near zero added, the hips' height (the OFFSET) standard.
-        first = lambda text: np.array(text.split(b"Frame Time:")[1].splitlines()[1].split()[:3], float)
+        def first(text):
+            return np.array(text.split(b"Frame Time:")[1].splitlines()[1].split()[:3], float)
+
         assert np.allclose(first(case.path.read_bytes()) - first(data), skeleton_out.offsets[0], atol=2e-6)
         # The same file written again in its own convention: the same bytes.
         assert format_bvh(again, positions="input") == data

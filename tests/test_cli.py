@@ -144,7 +144,8 @@ def test_missing_input_and_folder_input(runner, tmp_path):
 def test_info(runner, sample_clip):
     result = runner.invoke(cli, ["info", str(sample_clip), "--limbs"])
     assert result.exit_code == 0, result.output
-    for words in ["43 (+14 End Sites)", "ZXY x42", "149 at 120 fps", "1.233 s", "along Y", "4 leading", "lShldr > lForeArm > lHand"]:
+    for words in ["43 (+14 End Sites)", "ZXY x42", "149 at 120 fps", "1.233 s", "along Y", "4 leading",
+                  "lShldr > lForeArm > lHand"]:
         assert words in result.output
     data = json.loads(runner.invoke(cli, ["info", str(sample_clip), "--json"]).output)
     assert data["frames"] == 149 and data["joints"] == 43 and data["rotation_orders"] == {"ZYX": 1, "ZXY": 42}
@@ -278,7 +279,8 @@ def test_preview_writes_a_png(runner, sample_clip, tmp_path):
 
 TINY = {
     "root only": "ROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n}\n",
-    "root and End Site": "ROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+    "root and End Site": "ROOT Hips\n{\n  OFFSET 0 0 0\n"
+                         "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
                          "  End Site\n  {\n    OFFSET 0 1 0\n  }\n}\n",
 }
 

@@ -162,7 +162,8 @@ def test_parse_target():
 def test_a_planted_foot_stays_where_it_was_captured_and_the_leg_keeps_its_bones():
     motion, _ = read_bvh(leg_clip())
     config = bare(load_preset("looney"))
-    config = replace(config, subjoints=replace(config.subjoints, enabled=False), output=replace(config.output, skeleton="original"))
+    config = replace(config, subjoints=replace(config.subjoints, enabled=False),
+                     output=replace(config.output, skeleton="original"))
     captured = motion.world_positions()
     free = run(motion, replace(config, contacts=replace(config.contacts, enabled=False)))
     pinned = run(motion, config)
@@ -251,14 +252,16 @@ def test_feet_stay_planted_above_the_floor_without_pops(name, preset):
     motion, _ = read_bvh(shared(name), fps=120.0 if "amc2bvh" in name else None)
     config = load_preset(preset)
     skating, captured, deepest, accel = _figures(motion, config)
-    free_skating, _, free_deepest, free_accel = _figures(motion, replace(config, contacts=replace(config.contacts, enabled=False)))
+    free_skating, _, free_deepest, free_accel = _figures(
+        motion, replace(config, contacts=replace(config.contacts, enabled=False)))
     assert skating <= 1.5 * captured + 0.01, (skating, captured, free_skating)
     assert deepest <= 0.01, (deepest, free_deepest)
     # A planted foot is the captured foot, glitches and all (the kick's plant foot slips 4 h/s for
     # three frames): no pop beyond twice the free run's or the capture's own largest acceleration.
     first = detect_rest_frames(motion, motion.world_positions())
     cap = motion.world_positions()[first:]
-    captured_accel = float(np.linalg.norm(np.diff(cap, 2, axis=0), axis=-1).max()) / motion.frame_time**2 / motion.skeleton.height()
+    captured_accel = (float(np.linalg.norm(np.diff(cap, 2, axis=0), axis=-1).max())
+                      / motion.frame_time**2 / motion.skeleton.height())
     assert accel <= 2.0 * max(free_accel, captured_accel), (accel, free_accel, captured_accel)
 
 
@@ -346,7 +349,10 @@ def test_an_ease_is_the_shortest_that_keeps_the_eased_path_to_the_limit():
     still = np.zeros((frames, 1, 3))
     shift = np.tile([0.9, 0.0, 0.0], (frames, 1))  # the run is 0.9 away; the point may move 0.05 a frame
     (length, _), = ease_lengths(np.array([[first, frames - 1]]), still, shift, np.array([0.05]), 2, 60)
-    steps = lambda n: np.linalg.norm(np.diff(_eased(still, shift, first, n)[:, 0], axis=0), axis=-1).max()
+
+    def steps(n):
+        return np.linalg.norm(np.diff(_eased(still, shift, first, n)[:, 0], axis=0), axis=-1).max()
+
     assert steps(length) <= 0.05 + 1e-12 < steps(length - 1)
     assert 1.875 * 0.9 / 0.05 - 2 <= length <= 1.875 * 0.9 / 0.05  # a smootherstep's steepest slope, 15/8
 

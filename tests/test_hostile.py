@@ -64,7 +64,8 @@ def glb_with(path, change):
 
 
 def chain_bvh(path, depth):
-    lines = ["HIERARCHY", "ROOT J0", "{", "OFFSET 0 0 0", "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
+    lines = ["HIERARCHY", "ROOT J0", "{", "OFFSET 0 0 0",
+             "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
     for i in range(1, depth):
         lines += [f"JOINT J{i}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
     lines += ["End Site", "{", "OFFSET 0 1 0", "}"] + ["}"] * depth

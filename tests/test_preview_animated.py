@@ -43,7 +43,7 @@ def exaggerate(path, preset="cartoon"):
 def command(*args, **kwargs):
     """``mocap-exaggerate ARGS`` in a new process (the installed module, as the console script runs it)."""
     return subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", *map(str, args)],
-                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=300, **kwargs)
+                          capture_output=True, text=True, timeout=300, **kwargs)
 
 
 def gif_facts(data: bytes) -> tuple[int, int | None, list[int], list[bytes]]:

@@ -152,7 +152,8 @@ def test_overlapping_ranges_on_one_limb_are_an_error(boxing):
     specs = (StretchSpec(limb="left_arm", start=100, end=140, scale=2), StretchSpec(limb="left_arm", start=130, end=160, scale=2))
     with pytest.raises(ConfigError, match="overlap"):
         apply_stretches(world, motion.skeleton, limbs, specs, motion.frame_time)
-    several = (StretchSpec(limb="left_arm", start=100, end=140, scale=2), StretchSpec(limb="right_arm", start=100, end=140, scale=3),
+    several = (StretchSpec(limb="left_arm", start=100, end=140, scale=2),
+               StretchSpec(limb="right_arm", start=100, end=140, scale=3),
                StretchSpec(limb="left_arm", start=300, end=340, scale=0.5))
     result = apply_stretches(world, motion.skeleton, limbs, several, motion.frame_time)
     assert [e["limb"] for e in result.events] == ["left_arm", "right_arm", "left_arm"]

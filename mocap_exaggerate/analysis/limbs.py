@@ -154,7 +154,11 @@ def find_limbs(skeleton: Skeleton, explicit: dict[str, list[str]] | None = None)
         head = _find_head(skeleton, chest, sizes)
         if head is not None:
             up_path = _path(skeleton, torso_root, head)
-            neck_base = next((j for j in up_path if j != torso_root and _NECK.search(skeleton.names[j]) and up_path.index(j) > up_path.index(chest)), None)
+            neck_base = next(
+                (j for j in up_path
+                 if j != torso_root and _NECK.search(skeleton.names[j]) and up_path.index(j) > up_path.index(chest)),
+                None,
+            )
             if neck_base is None:
                 after_chest = up_path[up_path.index(chest) + 1 :]
                 neck_base = after_chest[0] if len(after_chest) > 1 else None

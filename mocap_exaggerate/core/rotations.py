@@ -260,10 +260,10 @@ def quat_from_matrix(matrix: np.ndarray) -> np.ndarray:
             part[:, 1] = (sub[:, 0, 2] - sub[:, 2, 0]) / (2.0 * big)
             part[:, 2] = (sub[:, 1, 0] - sub[:, 0, 1]) / (2.0 * big)
         else:
-            i, j, l = k, (k + 1) % 3, (k + 2) % 3
+            i, j, n = k, (k + 1) % 3, (k + 2) % 3
             part[:, j] = (sub[:, j, i] + sub[:, i, j]) / (2.0 * big)
-            part[:, l] = (sub[:, l, i] + sub[:, i, l]) / (2.0 * big)
-            part[:, 3] = (sub[:, l, j] - sub[:, j, l]) / (2.0 * big)
+            part[:, n] = (sub[:, n, i] + sub[:, i, n]) / (2.0 * big)
+            part[:, 3] = (sub[:, n, j] - sub[:, j, n]) / (2.0 * big)
         out[chosen] = part
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 

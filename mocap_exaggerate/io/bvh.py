@@ -436,7 +436,8 @@ def _parse_header(text: str, label: str) -> Skeleton:
                 listed.append(_CHANNEL_NAMES[name_token.lower()])
             if len(set(listed)) != len(listed):
                 raise tokens.error(f"channel listed twice on joint {names[joint]!r}", line)
-            extra, _ = (tokens.rest_of_line() if tokens.i < len(tokens.items) and tokens.items[tokens.i][1] == line else ([], line))
+            extra, _ = (tokens.rest_of_line() if tokens.i < len(tokens.items) and tokens.items[tokens.i][1] == line
+                        else ([], line))
             if extra:
                 raise tokens.error(f"CHANNELS says {count} but lists {count + len(extra)}", line)
             channels[joint] = tuple(listed)
@@ -498,11 +499,13 @@ def _parse_motion(
 
     if num_channels == 0:
         if len(rows):
-            raise InputError("the hierarchy has no channels but motion lines follow", source=label, line=first_line + int(rows[0]))
+            raise InputError("the hierarchy has no channels but motion lines follow", source=label,
+                             line=first_line + int(rows[0]))
         return np.zeros((declared, 0))
     if len(rows) < declared:
         complete = int(np.sum(counts[rows] == num_channels))
-        short = f"; line {first_line + int(rows[-1])} has {counts[rows[-1]]} of {num_channels} values" if len(rows) and counts[rows[-1]] != num_channels else ""
+        short = (f"; line {first_line + int(rows[-1])} has {counts[rows[-1]]} of {num_channels} values"
+                 if len(rows) and counts[rows[-1]] != num_channels else "")
         raise InputError(
             f"'Frames: {declared}' but only {complete} complete motion lines follow (file truncated?){short}",
             source=label,

@@ -98,7 +98,7 @@ def _read_obj_group(path: Path, group: str) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"cannot read ({error.strerror})", source=str(path)) from None
     vertices, faces = [], []
     current = None
-    for number, line in enumerate(text.splitlines(), start=1):
+    for _number, line in enumerate(text.splitlines(), start=1):
         if line.startswith("v "):
             vertices.append(line.split()[1:4])
         elif line.startswith("g "):

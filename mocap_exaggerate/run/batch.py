@@ -40,7 +40,8 @@ from ..core.errors import ConfigError, MocapError
 from ..io.files import OutputExistsError
 
 __all__ = ["Clip", "BatchOptions", "FileResult", "BatchInterrupted", "find_clips", "glob_regex", "convert_file",
-           "run_batch", "run_on_dask", "connect_dask", "check_scheduler", "is_complete", "is_output", "same_outputs", "check_folders", "DEFAULT_GLOB"]
+           "run_batch", "run_on_dask", "connect_dask", "check_scheduler", "is_complete", "is_output", "same_outputs",
+           "check_folders", "DEFAULT_GLOB"]
 
 #: Which files a batch takes: every .bvh at any depth (matched without regard to case).
 DEFAULT_GLOB = "**/*.bvh"

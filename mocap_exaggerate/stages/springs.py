@@ -26,7 +26,8 @@ import numpy as np
 
 from ..core.errors import ConfigError, check_flag, check_number
 
-__all__ = ["SpringConfig", "SpringLinks", "simulate_springs", "spring_links", "spring_substeps", "stable_link_stiffness", "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE"]
+__all__ = ["SpringConfig", "SpringLinks", "simulate_springs", "spring_links", "spring_substeps", "stable_link_stiffness",
+           "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE"]
 
 STIFFNESS_RANGE = (0.0, 1e5)
 DAMPING_RANGE = (0.0, 1e4)

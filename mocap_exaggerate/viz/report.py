@@ -159,7 +159,8 @@ def _row(out_dir: Path, result, number: int) -> str:
     length = f"<br><small>{frames / fps:.1f} s at {fps:.4g} fps</small>" if frames and fps else ""
     stretch = result.max_link_stretch if result.max_link_stretch is not None else result_info.get("max_link_stretch")
     seconds = result.seconds if result.status == "converted" else (listed or {}).get("timings", {}).get("total")
-    return (f'<tr class="{result.status}" id="clip-{number}"><td class="clip">{name}<br>{status}<div class="links">{links}</div></td>'
+    return (f'<tr class="{result.status}" id="clip-{number}">'
+            f'<td class="clip">{name}<br>{status}<div class="links">{links}</div></td>'
             f'{pictures}<td class="number">{frames if frames is not None else "?"}{length}</td>'
             f'<td class="number">{f"{stretch:.2f}x" if stretch is not None else "?"}</td>'
             f'<td class="events">{_events(result_info.get("stretch"))}</td>'
@@ -251,7 +252,8 @@ tr.skipped td.error {{ color: #555; }}
 {failures}
 <table>
 <thead><tr><th>clip</th><th>captured (grey) and exaggerated (orange)</th>
-<th>fastest end effector's path: captured (grey), average (green), exaggerated (orange)</th><th>frames</th><th>largest stretch</th>
+<th>fastest end effector's path: captured (grey), average (green), exaggerated (orange)</th>\
+<th>frames</th><th>largest stretch</th>
 <th>stretch events</th><th>ground contacts (times, frames)</th><th>time</th></tr></thead>
 <tbody>
 {rows}
