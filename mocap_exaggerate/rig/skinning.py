@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..core.errors import ConfigError
 from ..core.skeleton import Skeleton
@@ -274,6 +273,20 @@ class _Links(NamedTuple):
     straightest: np.ndarray
 
 
+def _coincident(points: np.ndarray, radius: np.ndarray) -> list[list[int]]:
+    """For each point, the points within its ``radius`` (itself included), as lists of indices.
+
+    Pairwise for a joint's few children; a k-d tree where a root has thousands (SciPy's
+    spatial module is imported only then: the command line does without it).
+    """
+    if len(points) <= 64:
+        near = np.linalg.norm(points[:, None] - points[None], axis=-1) <= radius[:, None]
+        return [list(np.flatnonzero(row)) for row in near]
+    from scipy.spatial import cKDTree
+
+    return cKDTree(points).query_ball_point(points, radius)
+
+
 def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarray) -> _Links:
     sub = hierarchy.skeleton
     count = skeleton.num_joints
@@ -333,9 +346,7 @@ def _link_knots(skeleton: Skeleton, hierarchy: SubjointHierarchy, rest: np.ndarr
     for k in range(count):
         starts.append(len(heads))
         if moving[k] and kids[k]:
-            # Siblings ending where another ends (within 2 % of its length): a k-d tree, as a root
-            # may have thousands of children.
-            tied = cKDTree(placed[kids[k]]).query_ball_point(placed[kids[k]], 0.02 * length[kids[k]])
+            tied = _coincident(placed[kids[k]], 0.02 * length[kids[k]])
             for i, c in enumerate(kids[k]):
                 groups.append(next_group + min(tied[i]) if len(tied[i]) > 1 else -1)
                 probes.append((placed[c], placed[kids[c][0]]) if len(kids[c]) == 1 else (placed[k], placed[c]))
