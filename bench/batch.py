@@ -51,7 +51,7 @@ def run(folder: Path, out: Path, jobs: int, extra: list[str]) -> tuple[float, li
 
 _SOLO = """
 import sys, tempfile, time
-from mocap_exaggerate.run.job import convert
+from mocap_exaggerate.jobs.job import convert
 clips = sys.argv[1:]
 with tempfile.TemporaryDirectory() as out:
     convert(clips[0], out, overwrite=True)  # warm

@@ -19,9 +19,9 @@ from mocap_exaggerate.analysis.quality import face_stretch
 from mocap_exaggerate.config import load_preset
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.skin import load_skin
+from mocap_exaggerate.jobs.outputs import output_skin
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.rig.binding import bind_skin
-from mocap_exaggerate.run.outputs import output_skin
 
 ROOT = Path(__file__).resolve().parent.parent
 

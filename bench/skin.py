@@ -21,11 +21,11 @@ Bodies
     `mocap_exaggerate.rig.binding.bind_skin`, as ``convert``/``--skin`` binds it.
 
 How the mesh is posed (what the GLB holds)
-    The bound skin is re-weighted onto the output skeleton by `mocap_exaggerate.run.outputs.output_skin`
+    The bound skin is re-weighted onto the output skeleton by `mocap_exaggerate.jobs.outputs.output_skin`
     (4 influences, the GLB's default; `reweight` on the rubber skeleton). Each output joint's world
     transform is the forward kinematics of the output motion's local rotations and translations
     (the GLB's animation tracks), with the uniform world scale ``thickness`` of
-    `mocap_exaggerate.run.outputs.output_thickness` where the GLB writes one; the inverse bind matrices
+    `mocap_exaggerate.jobs.outputs.output_thickness` where the GLB writes one; the inverse bind matrices
     undo the output skeleton's rest positions (identity orientations). So a vertex is
     ``sum_k w_k (s_j R_j (v - rest_j) + p_j)`` over its joints j (the GLB's turn onto +Y and its
     unit scale are one similarity for the whole scene and change no figure below). The captured
@@ -318,10 +318,10 @@ def measure_rig(task: tuple) -> list[dict]:
     """Rows (one per setting x body) of one clip."""
     path, rig, settings, bodies, cut, step = task
     from mocap_exaggerate.io.bvh import read_bvh
+    from mocap_exaggerate.jobs.outputs import base_skin, output_skin, output_thickness
     from mocap_exaggerate.pipeline import run
     from mocap_exaggerate.rig.binding import bind_skin
     from mocap_exaggerate.rig.body import default_skin
-    from mocap_exaggerate.run.outputs import base_skin, output_skin, output_thickness
     from mocap_exaggerate.stages.subjoints import minor_branches
 
     motion, _ = read_bvh(Path(path), fps=FPS.get(Path(path).name))

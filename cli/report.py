@@ -3,7 +3,7 @@
 On a terminal, a progress bar (files done, frames/s, time left) with failures
 printed above it as they happen; otherwise one plain line per file, which a
 log file or a farm's console keeps. ``--json`` adds one JSON line per file on
-stdout. Only reporting lives here; the work is `mocap_exaggerate.run.batch`.
+stdout. Only reporting lives here; the work is `mocap_exaggerate.jobs.batch`.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import TextIO
 
 import click
 
-from mocap_exaggerate.run.batch import FileResult
+from mocap_exaggerate.jobs.batch import FileResult
 
 log = logging.getLogger("mocap_exaggerate")
 

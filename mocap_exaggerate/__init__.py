@@ -32,9 +32,9 @@ _EXPORTS = {
     "save_bvh": "io.bvh",
     "run": "pipeline",
     "exaggerate": "pipeline",
-    "convert": "run.job",
-    "JobRecord": "run.job",
-    "describe": "run.job",
+    "convert": "jobs.job",
+    "JobRecord": "jobs.job",
+    "describe": "jobs.job",
 }
 
 __all__ = sorted(_EXPORTS)

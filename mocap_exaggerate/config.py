@@ -86,7 +86,7 @@ class OutputConfig:
     preserve_volume : the GLB keeps a stretched bone's volume: each joint is scaled by
         ``1 / sqrt(stretch)`` of its bone, so the skin around a link stretched 2x is
         0.71x as thick and around one squashed to half 1.41x
-        (`mocap_exaggerate.run.outputs.output_thickness`); off keeps every bone its own thickness.
+        (`mocap_exaggerate.jobs.outputs.output_thickness`); off keeps every bone its own thickness.
     """
 
     skeleton: str = "sub"

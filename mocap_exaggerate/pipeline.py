@@ -423,7 +423,7 @@ class PipelineResult:
     timings : seconds per step, in run order
     correct_report : CorrectReport or None when correction was off
     preserve_volume : ``output.preserve_volume``: the skinned outputs (GLB, previews) scale
-        each joint by `mocap_exaggerate.run.outputs.output_thickness`
+        each joint by `mocap_exaggerate.jobs.outputs.output_thickness`
     """
 
     motion: Motion

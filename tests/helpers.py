@@ -112,7 +112,7 @@ def skinned_vertices(glb: bytes, frame: int, result, meters: float):
     ibm = read(gltf.skins[0].inverseBindMatrices, np.float32, 16).reshape(-1, 4, 4).transpose(0, 2, 1)
     # Bind matrices are pure translations: v' = sum_j w_j (s_j R_j (v + t_j) + p_j), with s_j the
     # joint's world scale where the GLB keeps a stretched link's volume (output_thickness).
-    from mocap_exaggerate.run.outputs import output_thickness
+    from mocap_exaggerate.jobs.outputs import output_thickness
 
     local = positions[:, None, :] + ibm[joints, :3, 3]
     turned = quat_rotate(result.world_rotations[frame][joints], local)

@@ -13,8 +13,8 @@ from mocap_exaggerate.core.motion import Motion
 from mocap_exaggerate.core.rotations import quat_mul, quat_rotate
 from mocap_exaggerate.core.skeleton import Skeleton
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
+from mocap_exaggerate.jobs.outputs import make_glb
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.run.outputs import make_glb
 
 from .helpers import SAMPLE_DIR, glb_joint_positions, shared, shared_clip_params
 

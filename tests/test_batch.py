@@ -18,8 +18,8 @@ from pathlib import Path
 import pytest
 
 from mocap_exaggerate import load_preset
-from mocap_exaggerate.run.batch import BatchOptions, Clip, find_clips, glob_regex, run_batch
-from mocap_exaggerate.run.job import check_output_set
+from mocap_exaggerate.jobs.batch import BatchOptions, Clip, find_clips, glob_regex, run_batch
+from mocap_exaggerate.jobs.job import check_output_set
 
 from .helpers import SAMPLE_DIR
 

@@ -17,7 +17,7 @@ from urllib.parse import unquote, unquote_to_bytes
 import pytest
 
 from mocap_exaggerate import load_preset
-from mocap_exaggerate.run.batch import BatchOptions, FileResult, find_clips, run_batch
+from mocap_exaggerate.jobs.batch import BatchOptions, FileResult, find_clips, run_batch
 from mocap_exaggerate.viz.report import GENERATOR, picture_paths, pictures_current, write_report
 
 from .helpers import SAMPLE_DIR
@@ -319,7 +319,7 @@ def test_a_scheduler_without_workers_is_said_not_waited_on_forever(monkeypatch):
     from distributed import LocalCluster
 
     from mocap_exaggerate.core.errors import ConfigError
-    from mocap_exaggerate.run import batch
+    from mocap_exaggerate.jobs import batch
 
     monkeypatch.setattr(batch, "WAIT_FOR_WORKERS", 1.0)
     with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:

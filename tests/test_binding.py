@@ -239,8 +239,8 @@ def test_a_glb_this_tool_wrote_is_a_character_for_another_rig(tmp_path):
     """Our own rubber GLB of a Daz clip, as the skin of a CMU walk: its sub-joints (lShin_s1 ...)
     are pieces of their links, not knees, so the knee pairs with the knee and the foot with the foot."""
     from mocap_exaggerate.config import load_preset
+    from mocap_exaggerate.jobs.outputs import make_glb
     from mocap_exaggerate.pipeline import run
-    from mocap_exaggerate.run.outputs import make_glb
 
     daz, _ = read_bvh(SAMPLE_DIR / "cmu_09_01_run_daz.bvh")
     glb, _, _ = make_glb(daz, run(daz, load_preset("cartoon")))

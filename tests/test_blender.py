@@ -71,7 +71,7 @@ def test_blender_imports_the_glb_and_deforms_the_mesh_as_we_do(clip, tmp_path):
     from scipy.spatial import cKDTree
 
     from mocap_exaggerate.io.gltf import unit_scale
-    from mocap_exaggerate.run.outputs import make_glb
+    from mocap_exaggerate.jobs.outputs import make_glb
 
     from .helpers import skinned_vertices
 
@@ -103,7 +103,7 @@ def test_blender_stands_a_z_up_clip_upright_on_the_floor(tmp_path):
     """A Z-up clip (MakeHuman's zombie walk, `info`: height along Z): Blender imports its GLB standing
     on glTF's +Y, head well above the feet, the body's lowest point on the floor."""
     from mocap_exaggerate.io.gltf import unit_scale
-    from mocap_exaggerate.run.job import convert
+    from mocap_exaggerate.jobs.job import convert
 
     from .helpers import shared
 
@@ -132,7 +132,7 @@ def test_blender_deforms_the_makehuman_body_bound_to_a_clip_along_its_skeleton(c
     within a body's girth of the skeleton Blender poses, and the body is as tall as the skeleton."""
     from scipy.spatial import cKDTree
 
-    from mocap_exaggerate.run.job import convert
+    from mocap_exaggerate.jobs.job import convert
 
     from .helpers import SHARED_BVH
 

@@ -112,8 +112,8 @@ def captured_row(motion, bound, meters: float, up: tuple[int, float]) -> Row:
 
 def output_row(motion, config, skin=None) -> Row:
     """A run's GLB (``make_glb``, with ``skin`` or the default body) and its skin on the output skeleton."""
+    from mocap_exaggerate.jobs.outputs import base_skin, make_glb, output_skin, output_thickness
     from mocap_exaggerate.pipeline import run
-    from mocap_exaggerate.run.outputs import base_skin, make_glb, output_skin, output_thickness
     from mocap_exaggerate.stages.subjoints import minor_branches
 
     result = run(motion, config)

@@ -14,9 +14,9 @@ from mocap_exaggerate.analysis.quality import face_stretch as edge_stretch
 from mocap_exaggerate.config import load_preset
 from mocap_exaggerate.core.skeleton import Skeleton
 from mocap_exaggerate.io.bvh import read_bvh
+from mocap_exaggerate.jobs.outputs import output_skin
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.rig.body import default_skin
-from mocap_exaggerate.run.outputs import output_skin
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 
 from .helpers import SAMPLE_CLIPS, mesh_pieces, shared, shared_clip_params

@@ -18,10 +18,10 @@ from mocap_exaggerate.core.rotations import quat_mul, quat_rotate
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.gltf import unit_scale
 from mocap_exaggerate.io.skin import load_skin
+from mocap_exaggerate.jobs.outputs import make_glb, output_thickness
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.rig.body import default_skin
 from mocap_exaggerate.rig.skinning import Skin, reweight, subjoint_bind_positions
-from mocap_exaggerate.run.outputs import make_glb, output_thickness
 from mocap_exaggerate.stages.subjoints import build_hierarchy
 
 from .helpers import ROOT, SHARED_BVH, all_clip_params, shared, skinned_vertices
@@ -278,7 +278,7 @@ def test_gltf_json_is_pygltflibs_text(tmp_path):
     """The fast JSON writer gives pygltflib's own text, character for character, on real documents:
     8 influences (two attribute sets), looney volume scales, a 3,000-frame clip of 75 joints."""
     import mocap_exaggerate.io.gltf as gltf_module
-    from mocap_exaggerate.run.job import convert
+    from mocap_exaggerate.jobs.job import convert
 
     seen = []
 

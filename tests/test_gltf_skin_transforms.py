@@ -18,8 +18,8 @@ from mocap_exaggerate.core.skeleton import Skeleton
 from mocap_exaggerate.io.bvh import format_bvh, load_bvh
 from mocap_exaggerate.io.gltf import UPRIGHT, unit_scale
 from mocap_exaggerate.io.skin import load_gltf_skin, load_skin
+from mocap_exaggerate.jobs.outputs import make_glb
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.run.outputs import make_glb
 
 from .helpers import SAMPLE_DIR
 

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from mocap_exaggerate.run.job import check_output_set
+from mocap_exaggerate.jobs.job import check_output_set
 
 from .helpers import SAMPLE_DIR
 

@@ -173,7 +173,7 @@ def test_a_stage_added_to_the_declared_list_runs_in_its_place(sample_clip):
 
 
 def test_a_set_is_complete_only_while_every_file_matches_its_manifest(sample_clip, tmp_path):
-    from mocap_exaggerate.run.job import check_output_set
+    from mocap_exaggerate.jobs.job import check_output_set
 
     record = convert(sample_clip, tmp_path, FAST, glb=False)
     manifest = record.outputs["manifest"]
@@ -212,7 +212,7 @@ def test_an_input_named_like_a_temporary_is_not_cleared_away(sample_clip, tmp_pa
 
 
 def test_outputs_a_run_no_longer_writes_do_not_stay_beside_its_manifest(sample_clip, tmp_path):
-    from mocap_exaggerate.run.job import check_output_set
+    from mocap_exaggerate.jobs.job import check_output_set
 
     convert(sample_clip, tmp_path, FAST)
     with pytest.raises(OutputExistsError):
@@ -221,3 +221,21 @@ def test_outputs_a_run_no_longer_writes_do_not_stay_beside_its_manifest(sample_c
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cmu_09_01_run_daz.bvh", "cmu_09_01_run_daz.json",
                                                          "cmu_09_01_run_daz.pipeline.toml"]
     assert check_output_set(tmp_path / "cmu_09_01_run_daz.json") == []
+
+
+def test_the_public_names_stay_the_functions_after_every_subpackage_is_imported():
+    # A subpackage named like a public function (a `run/` beside `run()`) replaces the function
+    # on the package the moment anything imports it.
+    import importlib
+    import pkgutil
+
+    import mocap_exaggerate
+
+    for module in pkgutil.walk_packages(mocap_exaggerate.__path__, "mocap_exaggerate."):
+        importlib.import_module(module.name)
+    for name in mocap_exaggerate.__all__:
+        value = getattr(mocap_exaggerate, name)
+        assert not isinstance(value, type(mocap_exaggerate)), f"mocap_exaggerate.{name} is a module"
+    from mocap_exaggerate import run
+
+    assert callable(run)

@@ -17,8 +17,8 @@ from scipy.spatial import cKDTree
 from mocap_exaggerate.config import PipelineConfig, load_preset
 from mocap_exaggerate.core.skeleton import Skeleton
 from mocap_exaggerate.io.bvh import read_bvh
+from mocap_exaggerate.jobs.outputs import THICKNESS, base_skin, make_glb, output_skin, output_thickness
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.run.outputs import THICKNESS, base_skin, make_glb, output_skin, output_thickness
 from mocap_exaggerate.stages.contacts import ContactConfig
 from mocap_exaggerate.stages.correct import CorrectConfig
 from mocap_exaggerate.stages.extrapolate import ExtrapolateConfig

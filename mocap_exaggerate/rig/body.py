@@ -15,7 +15,7 @@ moved by the branch joint; runs meeting at more than `MAX_BEND` in the rest pose
 separate tubes, each round at the joint they share. A link shorter than its
 tube is thick (a Daz buttock, an iClone waist) is folded into its neighbour.
 Thinner where stretched: the GLB scales each joint by
-`mocap_exaggerate.run.outputs.output_thickness` (volume kept), and so does the preview.
+`mocap_exaggerate.jobs.outputs.output_thickness` (volume kept), and so does the preview.
 
 Why not separate capsules, one per link (the body before): a capsule's round
 ends overlapped its neighbours', and on the rubber skeleton the overlapping caps

@@ -27,9 +27,9 @@ from ..core.errors import ConfigError, check_number
 from ..core.motion import Motion
 from ..core.rotations import quat_rotate
 from ..core.skeleton import Skeleton
+from ..jobs.outputs import base_skin, output_skin, output_thickness
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin
-from ..run.outputs import base_skin, output_skin, output_thickness
 
 __all__ = ["pose_skin", "pose_bodies", "PosedBodies", "view_limits", "render_preview", "telling_frames", "lined_up",
            "write_preview", "fastest_end", "render_trajectory", "telling_window", "preview_window",
@@ -54,7 +54,7 @@ def pose_skin(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np
     bind : (J, 3) rest (bind) position of each skeleton joint;
     world_rot : (..., J, 4), world_pos : (..., J, 3), any leading axes (frames) broadcast;
     joint_index : (len(skin.joint_names),) skeleton index of each skin joint;
-    scale : (..., J) world scale of each joint (the GLB's `mocap_exaggerate.run.outputs.output_thickness`) or None.
+    scale : (..., J) world scale of each joint (the GLB's `mocap_exaggerate.jobs.outputs.output_thickness`) or None.
     The bind pose has identity orientations (BVH rest), so a vertex moves as
     ``s_j R_j (v - bind_j) + p_j`` under joint j.
     """
@@ -630,8 +630,8 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     from ..config import load_preset
     from ..io.bvh import read_bvh
     from ..io.files import atomic_write
+    from ..jobs.job import check_targets
     from ..pipeline import run
-    from ..run.job import check_targets
 
     output = Path(output)
     kind = _kind(output, trajectory)

@@ -1,6 +1,6 @@
 """What a run turns into: the manifest, the skin bound to the output skeleton, the GLB bytes.
 
-Everything here returns bytes or plain data; `mocap_exaggerate.run.job` decides
+Everything here returns bytes or plain data; `mocap_exaggerate.jobs.job` decides
 where they go and writes them.
 """
 

@@ -13,7 +13,7 @@ input bytes and the same parameters.
 Example::
 
     from mocap_exaggerate import load_preset
-    from mocap_exaggerate.run.batch import BatchOptions, find_clips, run_batch
+    from mocap_exaggerate.jobs.batch import BatchOptions, find_clips, run_batch
 
     clips, problems = find_clips("mocap/")
     results = run_batch(clips, "out/", BatchOptions(load_preset("cartoon")), jobs=2)
@@ -47,7 +47,7 @@ __all__ = ["Clip", "BatchOptions", "FileResult", "BatchInterrupted", "find_clips
 DEFAULT_GLOB = "**/*.bvh"
 
 #: Modules a worker imports once, before its first clip.
-_PRELOAD = ["mocap_exaggerate.run.job", "mocap_exaggerate.pipeline", "mocap_exaggerate.run.outputs",
+_PRELOAD = ["mocap_exaggerate.jobs.job", "mocap_exaggerate.pipeline", "mocap_exaggerate.jobs.outputs",
             "mocap_exaggerate.io.gltf", "mocap_exaggerate.rig.body", "mocap_exaggerate.rig.skinning"]
 
 
