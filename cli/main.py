@@ -11,6 +11,7 @@ import json
 import logging
 import math
 import os
+import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -23,7 +24,7 @@ from mocap_exaggerate import __version__
 from mocap_exaggerate.config import DEFAULT_PRESET, preset_description, preset_names, read_config_text, resolve_config
 from mocap_exaggerate.core.errors import MocapError
 from mocap_exaggerate.io.files import OutputExistsError
-from mocap_exaggerate.run.batch import DEFAULT_GLOB
+from mocap_exaggerate.jobs.batch import DEFAULT_GLOB
 from mocap_exaggerate.stages.contacts import parse_target
 from mocap_exaggerate.stages.stretch import parse_stretch
 
@@ -92,6 +93,30 @@ def _parse_weights(ctx, param, values: tuple[str, ...]) -> tuple[tuple[str, floa
             raise click.BadParameter(f"{item!r}: weight must be between 0 and 10")
         out.append((key.strip(), weight))
     return tuple(out)
+
+
+def _parse_settings(ctx, param, values: tuple[str, ...]) -> dict[str, Any]:
+    """``--set block.key=value`` pairs as a nested table; the config checks the keys and values."""
+    import tomllib
+
+    _keep_raw(ctx, param, values)
+    table: dict[str, Any] = {}
+    for item in values:
+        key, sep, text = item.partition("=")
+        path = [part.strip() for part in key.split(".")]
+        if not sep or len(path) < 2 or not all(re.fullmatch(r"[A-Za-z_][\w*?\[\]-]*", part) for part in path):
+            raise click.BadParameter(f"{_shown(item)} is not KEY=VALUE with a dotted key (e.g. springs.blend=0.3)")
+        try:
+            value = tomllib.loads(f"v = {text.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = text.strip()  # plain text: 0.2s, looney
+        node = table
+        for part in path[:-1]:
+            if not isinstance(node.setdefault(part, {}), dict):
+                raise click.BadParameter(f"{_shown(item)}: {part} is set to a value and to a table")
+            node = node[part]
+        node[path[-1]] = value
+    return table
 
 
 def _folder_argument(ctx, param, value: str) -> Path:
@@ -174,6 +199,10 @@ def pipeline_options(func: Callable) -> Callable:
                           "(Reallusion/iClone, MakeHuman); auto tells them apart. Default auto."),
         click.option("--up", type=click.Choice(["auto", "x", "y", "z"]), default=None,
                      help="The axis the body stands along; auto: from the rest pose. Default auto."),
+        click.option("--set", "settings", multiple=True, callback=_parse_settings, metavar="KEY=VALUE",
+                     help="Any setting of a pipeline file by its key, e.g. extrapolate.max_speed=2 or "
+                          "springs.blend=0.3 (docs/reference/config.md lists them); the value is read as TOML, "
+                          "else as text. Repeatable; the flags above win over it."),
     ]
     for option in reversed(options):
         func = option(func)
@@ -187,7 +216,7 @@ def output_options(func: Callable) -> Callable:
         click.option("--skin", "skin_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
                      help="Your character for the GLB: a skinned .glb/.gltf, a MakeHuman .obj (+ .mhw, .mhskel "
                           "beside it) or an .npz bound to the clip's joints. Made for another rig, it is fitted to "
-                          "the clip (joints paired by role and name). Default: a capsule body grown from the skeleton."),
+                          "the clip (joints paired by role and name). Default: a rubber body grown from the skeleton."),
         click.option("--joint-map", "joint_map_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
                      help="With --skin: a text file of 'clip joint = skin joint' lines, for joints the automatic "
                           "pairing misses or gets wrong."),
@@ -232,7 +261,15 @@ def _overrides(p: dict[str, Any]) -> dict[str, Any]:
             table[block][key] = value
     if p["weights"]:
         table["extrapolate"]["weights"] = dict(p["weights"])
-    return {k: v for k, v in table.items() if v}
+    flags = {k: v for k, v in table.items() if v}
+    return _merge_tables(p.get("settings") or {}, flags)  # --set, then the flags over it
+
+
+def _merge_tables(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in over.items():
+        out[key] = _merge_tables(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out
 
 
 def _length(value: str | None) -> float | str | None:
@@ -370,7 +407,7 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
         return _exaggerate_several(input_paths, output, name, overwrite, skin_path, units, influences, write_glb,
                                    trails_path, path_file, options, joint_map_path)
     input_path = input_paths[0]
-    from mocap_exaggerate.run.job import convert
+    from mocap_exaggerate.jobs.job import convert
 
     preset, config = _config_from_options(options)
     from_stdin = str(input_path) == "-"
@@ -434,7 +471,7 @@ def _joint_map(skin_path: Path | None, joint_map_path: Path | None) -> dict | No
 
 def _batch_options(options: dict[str, Any], *, overwrite: bool, resume: bool, write_glb: bool,
                    skin_path: Path | None, units: str, influences: str, joint_map_path: Path | None = None):
-    from mocap_exaggerate.run.batch import BatchOptions
+    from mocap_exaggerate.jobs.batch import BatchOptions
 
     preset, config = _config_from_options(options)
     joint_map = (_check_output_settings(units, influences, skin_path, joint_map_path) if write_glb
@@ -450,7 +487,7 @@ def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bo
     the exit code (0 all done, 1 some failed, 130 interrupted)."""
     import time
 
-    from mocap_exaggerate.run.batch import BatchInterrupted, run_batch
+    from mocap_exaggerate.jobs.batch import BatchInterrupted, run_batch
 
     from .report import Progress, summary
 
@@ -491,7 +528,7 @@ def _run_reported(clips, out_dir: Path, batch_options, *, jobs: int, as_json: bo
 
 def _exaggerate_several(input_paths, output: Path, name, overwrite, skin_path, units, influences, write_glb,
                         trails_path, path_file, options, joint_map_path=None) -> None:
-    from mocap_exaggerate.run.batch import Clip, same_outputs
+    from mocap_exaggerate.jobs.batch import Clip, same_outputs
 
     if any(str(p) == "-" for p in input_paths):
         raise UserError("'-' (standard input) can only be the one input")
@@ -527,7 +564,7 @@ def folder_arguments(func: Callable) -> Callable:
 
 def _find_batch_clips(in_dir: Path, out_dir: Path, pattern: str):
     """The clips a batch or plan takes, and what was met on the way; a usage error when none match."""
-    from mocap_exaggerate.run.batch import check_folders, find_clips
+    from mocap_exaggerate.jobs.batch import check_folders, find_clips
 
     check_folders(in_dir, out_dir, pattern)
     clips, problems = find_clips(in_dir, pattern, exclude=[out_dir])
@@ -553,7 +590,7 @@ def _find_batch_clips(in_dir: Path, out_dir: Path, pattern: str):
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run the clips on Dask distributed: 'local' (a LocalCluster of -j workers) or a scheduler "
                    "address such as tcp://host:8786 (the folders must be at the same paths on its workers). "
-                   "Needs: pip install 'mocap-exaggerate[dask]'.")
+                   "Needs the dask extra (from a checkout: pip install '.[dask]').")
 @output_options
 @pipeline_options
 @verbosity_options
@@ -577,7 +614,7 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
     """
     import shlex
 
-    from mocap_exaggerate.run.batch import check_scheduler, default_jobs
+    from mocap_exaggerate.jobs.batch import check_scheduler, default_jobs
 
     batch_options = _batch_options(options, overwrite=overwrite, resume=resume, write_glb=write_glb,
                                    skin_path=skin_path, units=units, influences=influences,
@@ -734,7 +771,7 @@ def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float
     Example:
       mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs --groups --contacts
     """
-    from mocap_exaggerate.run.job import describe
+    from mocap_exaggerate.jobs.job import describe
 
     label = "<stdin>" if str(input_path) == "-" else str(input_path)
     data = describe(input_path, fps=fps, limbs=limbs, groups=groups, contacts=contacts, label=label,
@@ -789,7 +826,7 @@ def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float
               help="Show this many seconds [default: all; an animation stops at 10].")
 @click.option("--overwrite", is_flag=True, help="Replace the file if it exists.")
 @click.option("--skin", "skin_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Draw your character (as 'exaggerate --skin' takes it) instead of the capsule body.")
+              help="Draw your character (as 'exaggerate --skin' takes it) instead of the default rubber body.")
 @click.option("--joint-map", "joint_map_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="With --skin: 'clip joint = skin joint' lines for joints the pairing misses.")
 @pipeline_options

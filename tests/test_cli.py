@@ -2,6 +2,8 @@
 
 import json
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -10,7 +12,7 @@ from click.testing import CliRunner
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate_cli.main import cli
 
-from .helpers import MALFORMED
+from .helpers import MALFORMED, SAMPLE_DIR
 
 
 @pytest.fixture
@@ -338,3 +340,33 @@ def test_help_and_version_answer(tmp_path):
     done = command("--help")
     assert done.returncode == 0 and "exaggerate" in done.stdout
     assert command("--version").stdout.strip().endswith("0.1.0")
+
+
+def test_set_reaches_any_setting_and_the_named_flags_win(tmp_path):
+    # extrapolate.max_speed and springs.link_stiffness have no flag of their own.
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "exaggerate",
+                           str(SAMPLE_DIR / "cmu_09_01_run_daz.bvh"), "-o", str(out), "--no-glb",
+                           "--set", "extrapolate.max_speed=3", "--set", "springs.link_stiffness=90",
+                           "--set", "extrapolate.smooth=0.1s", "--set", "springs.blend=0.2", "--blend", "0.3"],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    from mocap_exaggerate.config import resolve_config
+
+    written = resolve_config(None, (out / "cmu_09_01_run_daz.pipeline.toml").read_text())
+    assert written.extrapolate.max_speed == 3 and written.springs.link_stiffness == 90
+    assert written.extrapolate.smooth == "0.1s" and written.springs.blend == 0.3
+
+
+@pytest.mark.parametrize(("setting", "says"), [
+    ("x=1", "dotted key"), ("springs", "dotted key"), ("springs.nope=1", "unknown key springs.nope"),
+    ("springs.blend=2", "springs.blend must be"), ("nope.blend=1", "unknown block"),
+    ("extrapolate.max_speed=1e999", "max_speed"), ("springs.blend=[1,2]", "springs.blend"),
+])
+def test_a_bad_set_is_one_line_and_writes_nothing(tmp_path, setting, says):
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "exaggerate",
+                           str(SAMPLE_DIR / "cmu_09_01_run_daz.bvh"), "-o", str(out), "--set", setting],
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and says in done.stderr and "Traceback" not in done.stderr, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and not out.exists()
