@@ -370,3 +370,19 @@ def test_a_bad_set_is_one_line_and_writes_nothing(tmp_path, setting, says):
                           capture_output=True, text=True)
     assert done.returncode == 2 and says in done.stderr and "Traceback" not in done.stderr, done.stderr
     assert len(done.stderr.strip().splitlines()) == 1 and not out.exists()
+
+
+@pytest.mark.parametrize(("option", "says"), [
+    (["--sigma", "bad"], "sigma"), (["--units", "furlong"], "furlong"), (["--skin", "missing.glb"], "missing.glb"),
+    (["--influences", "5"], "influences"), (["--path-file", "missing.json"], "missing.json"),
+])
+def test_a_bad_option_is_said_before_an_existing_output(tmp_path, option, says):
+    # Told about the option first: not "exists, pass --overwrite", then the option after --overwrite.
+    out = tmp_path / "out"
+    clip = str(SAMPLE_DIR / "cmu_09_01_run_daz.bvh")
+    main = [sys.executable, "-m", "mocap_exaggerate_cli.main", "exaggerate", clip, "-o", str(out)]
+    assert subprocess.run(main + ["--no-glb"], capture_output=True).returncode == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    done = subprocess.run(main + option, capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 2 and says in done.stderr and "exists" not in done.stderr, done.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before

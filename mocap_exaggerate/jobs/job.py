@@ -239,7 +239,7 @@ def convert(
     # a manifest that does not list them. Refused like any output, removed with overwrite.
     retired = [] if glb or to_stream else [Path(output) / f"{stem}.glb", Path(output) / f"{stem}.weights.npz"]
     retired = [path for path in retired if path.exists()]
-    check_targets({**targets, **{f"old {p.suffix}": p for p in retired}}, inputs, overwrite)
+    # Every option first (a bad unit, skin or path file is the first thing said), then the outputs.
     if glb and not to_stream:
         from ..io.gltf import unit_scale
 
@@ -260,6 +260,7 @@ def convert(
         skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
     elif joint_map:
         raise ConfigError("a joint map pairs the clip's joints with a skin's: give the skin too (--skin)")
+    check_targets({**targets, **{f"old {p.suffix}": p for p in retired}}, inputs, overwrite)
     if parameters is None and not to_stream:
         parameters = parameters_digest(config, preset=preset, glb=glb, units=units, influences=influences, skin=skin,
                                        path_file=path_file, joint_map=joint_map)
