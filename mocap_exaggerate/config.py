@@ -16,7 +16,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from .core.errors import ConfigError, check_flag, check_number
+from .core.errors import ConfigError, check_choice, check_flag, check_number
 from .io.bvh import FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES, check_bvh_positions
 from .stages.contacts import ContactConfig, TargetSpec
 from .stages.correct import CorrectConfig
@@ -61,14 +61,11 @@ class InputConfig:
     up: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.tpose not in _TPOSE_MODES:
-            raise ConfigError(f"input.tpose must be one of {', '.join(_TPOSE_MODES)}, got {self.tpose!r}")
+        check_choice("input.tpose", self.tpose, _TPOSE_MODES)
         if self.fps is not None:
             check_number("input.fps", self.fps, *FPS_RANGE)
-        if self.root_offset not in ROOT_OFFSET_MODES:
-            raise ConfigError(f"input.root_offset must be one of {', '.join(ROOT_OFFSET_MODES)}, got {self.root_offset!r}")
-        if self.up not in UP_AXES:
-            raise ConfigError(f"input.up must be one of {', '.join(UP_AXES)}, got {self.up!r}")
+        check_choice("input.root_offset", self.root_offset, ROOT_OFFSET_MODES)
+        check_choice("input.up", self.up, UP_AXES)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -94,8 +91,7 @@ class OutputConfig:
     preserve_volume: bool = True
 
     def __post_init__(self) -> None:
-        if self.skeleton not in _SKELETON_MODES:
-            raise ConfigError(f"output.skeleton must be one of {', '.join(_SKELETON_MODES)}, got {self.skeleton!r}")
+        check_choice("output.skeleton", self.skeleton, _SKELETON_MODES)
         check_bvh_positions(self.bvh_positions, "output.bvh_positions")
         check_flag("output.preserve_volume", self.preserve_volume)
 

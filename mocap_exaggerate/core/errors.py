@@ -6,7 +6,7 @@ setting at fault, so the command line can print it as it is.
 
 from __future__ import annotations
 
-__all__ = ["MocapError", "InputError", "ConfigError", "check_number", "check_flag"]
+__all__ = ["MocapError", "InputError", "ConfigError", "check_number", "check_flag", "check_choice"]
 
 
 class MocapError(Exception):
@@ -44,3 +44,23 @@ def check_flag(where: str, value: object) -> None:
     """Raise a ConfigError naming ``where`` unless ``value`` is true or false."""
     if not isinstance(value, bool):
         raise ConfigError(f"{where} must be true or false, got {value!r}")
+
+
+def check_choice(where: str, value: object, choices: tuple[str, ...], *, error=None) -> str:
+    """``value`` if it is one of ``choices``, else an error naming ``where`` and the choices.
+
+    error : makes the exception from the message (default `ConfigError`), for the few places
+        that raise another kind (the reader's `InputError`, a programmer's `ValueError`)
+
+    >>> check_choice("input.up", "w", ("auto", "x", "y", "z"))
+    Traceback (most recent call last):
+    mocap_exaggerate.core.errors.ConfigError: input.up must be one of auto, x, y, z, got 'w'
+    """
+    try:
+        if value in choices:
+            return value
+    except TypeError:  # an unhashable or odd value is simply not one of them
+        pass
+    message = f"{where} must be one of {', '.join(choices)}, got {value!r:.60}"
+    raise (error or ConfigError)(message)
+

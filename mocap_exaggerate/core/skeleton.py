@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import check_choice
 from .kinematics import rest_positions
 
 __all__ = ["Skeleton", "POSITION_CHANNELS", "ROTATION_CHANNELS"]
@@ -55,8 +56,7 @@ class Skeleton:
             )
         if len(self.channels) != n:
             raise ValueError(f"skeleton has {n} joints but {len(self.channels)} channel lists")
-        if self.positions not in POSITION_MODES:
-            raise ValueError(f"positions must be one of {', '.join(POSITION_MODES)}, got {self.positions!r}")
+        check_choice("positions", self.positions, POSITION_MODES, error=ValueError)
         if self.up not in (None, 0, 1, 2):
             raise ValueError(f"up must be None, 0, 1 or 2, got {self.up!r}")
         if n == 0 or parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, n)):

@@ -29,7 +29,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..core.errors import ConfigError, InputError
+from ..core.errors import InputError, check_choice
 from ..core.motion import Motion
 from ..core.rotations import quat_from_euler, quat_to_euler
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
@@ -120,11 +120,8 @@ def read_bvh(
     InputError
         with ``file:line: problem`` for anything malformed.
     """
-    if root_offset not in ROOT_OFFSET_MODES:
-        raise InputError(f"root_offset must be one of {', '.join(ROOT_OFFSET_MODES)}, got {root_offset!r}",
-                         source="root_offset")
-    if up not in UP_AXES:
-        raise InputError(f"up must be one of {', '.join(UP_AXES)}, got {up!r}", source="up")
+    check_choice("root_offset", root_offset, ROOT_OFFSET_MODES, error=lambda m: InputError(m, source="root_offset"))
+    check_choice("up", up, UP_AXES, error=lambda m: InputError(m, source="up"))
     data, label = read_source(source, name)
     report = BVHReport(source=label)
     if b"\x00" in data[:4096]:
@@ -587,9 +584,7 @@ def _motion_from_channels(skeleton: Skeleton, values: np.ndarray, frame_time: fl
 
 def check_bvh_positions(positions: object, name: str = "bvh positions") -> str:
     """``positions`` if it is one of `BVH_POSITIONS`, else a ConfigError naming it (as ``name``)."""
-    if positions not in BVH_POSITIONS:
-        raise ConfigError(f"{name} must be one of {', '.join(BVH_POSITIONS)}, got {positions!r:.60}")
-    return positions
+    return check_choice(name, positions, BVH_POSITIONS)
 
 
 def written_positions(skeleton: Skeleton, positions: str = "standard") -> str:

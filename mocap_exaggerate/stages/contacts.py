@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..analysis.limbs import Limb
-from ..core.errors import ConfigError, check_flag, check_number
+from ..core.errors import ConfigError, check_choice, check_flag, check_number
 from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
 from ..core.skeleton import Skeleton
 from ..core.timing import check_duration, parse_duration, parse_frame, smootherstep, spread_max
@@ -104,8 +104,7 @@ class ContactConfig:
         if isinstance(self.joints, str) or not all(isinstance(j, str) for j in self.joints):
             raise ConfigError(f"contacts.joints must be a list of names (feet, hands, limbs or joints), got {self.joints!r}")
         object.__setattr__(self, "joints", tuple(self.joints))
-        if self.anchor not in _ANCHORS:
-            raise ConfigError(f"contacts.anchor must be one of {', '.join(_ANCHORS)}, got {self.anchor!r}")
+        check_choice("contacts.anchor", self.anchor, _ANCHORS)
         check_number("contacts.height", self.height, 0, 1)
         check_number("contacts.speed", self.speed, 0, 100)
         for name in ("min_duration", "blend"):
