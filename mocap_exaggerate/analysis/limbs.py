@@ -21,7 +21,7 @@ import numpy as np
 
 from ..core.skeleton import Skeleton
 
-__all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints", "limb_length", "standing_up"]
+__all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints", "limb_length", "standing_up", "is_helper", "main_child"]
 
 LIMB_NAMES = ("left_arm", "right_arm", "left_leg", "right_leg", "spine", "neck")
 
@@ -71,10 +71,22 @@ def _side_from_name(name: str) -> str | None:
     return None
 
 
-def _main_child(skeleton: Skeleton, joint: int, sizes: np.ndarray) -> int | None:
-    """The child that carries the limb on: not a helper, largest subtree, then longest link."""
+def is_helper(name: str) -> bool:
+    """A twist, share, roll or corrective bone, an end nub or a ``__``-hidden joint: not a limb's bone."""
+    return bool(_HELPER.search(name))
+
+
+def main_child(skeleton: Skeleton, joint: int, sizes: np.ndarray | None = None, *,
+               helpers: bool = True) -> int | None:
+    """The child that carries the limb on: not a helper, largest subtree, then longest link.
+
+    sizes : (J,) `Skeleton.subtree_sizes`, where the caller has them already
+    helpers : where every child is a helper, take the largest of them (else None)
+    """
+    if sizes is None:
+        sizes = skeleton.subtree_sizes()
     children = [c for c in skeleton.children(joint) if not _HELPER.search(skeleton.names[c])]
-    if not children:
+    if not children and helpers:
         children = list(skeleton.children(joint))
     if not children:
         return None
@@ -130,7 +142,7 @@ def find_limbs(skeleton: Skeleton, explicit: dict[str, list[str]] | None = None)
     skeletons the heuristics do not understand; those win over detection.
     """
     limbs: dict[str, Limb] = {}
-    sizes = np.array([len(skeleton.descendants(j)) for j in range(skeleton.num_joints)])
+    sizes = skeleton.subtree_sizes()
     lateral = 0
     for kind, pattern in (("arm", _ELBOW), ("leg", _KNEE)):
         pair = _pair(skeleton, pattern, lateral)
@@ -138,7 +150,7 @@ def find_limbs(skeleton: Skeleton, explicit: dict[str, list[str]] | None = None)
             continue
         for side, middle in zip(("left", "right"), pair):
             base = int(skeleton.parents[middle])
-            end = _main_child(skeleton, middle, sizes)
+            end = main_child(skeleton, middle, sizes)
             if base <= 0 or end is None:
                 continue
             limbs[f"{side}_{kind}"] = Limb(f"{side}_{kind}", (base, middle, end))

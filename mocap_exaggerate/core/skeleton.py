@@ -85,6 +85,13 @@ class Skeleton:
         """Indices of the direct children of ``joint``."""
         return np.flatnonzero(self.parents == joint)
 
+    def subtree_sizes(self) -> np.ndarray:
+        """(J,) how many joints each joint's subtree holds, itself included (parents come first)."""
+        sizes = np.ones(self.num_joints, dtype=np.int64)
+        for j in range(self.num_joints - 1, 0, -1):
+            sizes[self.parents[j]] += sizes[j]
+        return sizes
+
     def descendants(self, joint: int) -> np.ndarray:
         """Indices of ``joint`` and every joint below it, in order."""
         inside = np.zeros(self.num_joints, bool)

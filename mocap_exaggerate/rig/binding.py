@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..analysis.limbs import find_limbs
+from ..analysis.limbs import find_limbs, main_child
 from ..core.errors import ConfigError, InputError
 from ..core.rotations import quat_between, quat_to_matrix
 from ..core.skeleton import Skeleton
@@ -58,7 +58,6 @@ _TRUNK = re.compile(r"^(hips|pelvis|spine\d+|neck\d+|head|(left|right)_(clavicle
 _UNPAIRED = ("left_hip", "right_hip")
 _SEGMENT = re.compile(r"\d+")
 _SUBJOINT = re.compile(r"^(.*)_s\d+$")
-_HELPER = re.compile(r"twist|share|roll|bend|helper|corrective|adjust|nub|end$", re.IGNORECASE)
 AXIAL_LIMIT = 2.0  # a bone stretches or shrinks at most this much beyond the overall scale
 
 
@@ -82,13 +81,6 @@ def _segment_stem(name: str) -> str:
     return _SEGMENT.sub("", name).lower()
 
 
-def _main_child(skeleton: Skeleton, joint: int) -> int | None:
-    children = [int(c) for c in skeleton.children(joint) if not _HELPER.search(skeleton.names[c])]
-    if not children:
-        return None
-    return max(children, key=lambda c: (len(skeleton.descendants(c)), skeleton.link_lengths()[c]))
-
-
 def _chain_top(skeleton: Skeleton, joint: int) -> int:
     """Up from ``joint`` over the segments of the same bone (MakeHuman's upperarm02.L -> upperarm01.L)."""
     while True:
@@ -102,7 +94,7 @@ def _chain_bottom(skeleton: Skeleton, joint: int) -> int:
     """Down from a limb's middle over its segments (lowerarm01.L -> lowerarm02.L) to the joint after them."""
     stem = _segment_stem(skeleton.names[joint])
     while True:
-        child = _main_child(skeleton, joint)
+        child = main_child(skeleton, joint, helpers=False)
         if child is None:
             return joint
         if _segment_stem(skeleton.names[child]) != stem:
@@ -148,7 +140,7 @@ def joint_roles(skeleton: Skeleton) -> tuple[dict[str, int], dict[str, list[int]
             if above > 0:
                 roles[f"{side}_{'clavicle' if kind == 'arm' else 'hip'}"] = above
             if kind == "leg":
-                toe = _main_child(skeleton, end)
+                toe = main_child(skeleton, end, helpers=False)
                 if toe is not None:
                     roles[f"{side}_toe"] = toe
     chains: dict[str, list[int]] = {}
