@@ -443,6 +443,11 @@ class PipelineResult:
     constraints: dict | None = None
     preserve_volume: bool = True
 
+    @property
+    def first(self) -> int:
+        """The first frame of real motion in the output (after any rest frames kept)."""
+        return self.rest_frames if not self.rest_frames_dropped else 0
+
 
 def prepare(motion: Motion, config: InputConfig | None = None, *, limbs: dict | None = None,
             paths: dict | None = None) -> State:

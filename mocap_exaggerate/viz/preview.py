@@ -236,7 +236,7 @@ def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, w
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
 
-    first = result.rest_frames if not result.rest_frames_dropped else 0
+    first = result.first
     last = result.world_positions.shape[0] - 1
     picks = np.unique(np.linspace(first, last, frames).astype(int) if at is None else np.clip(at, 0, last))
     bodies = pose_bodies(motion, result, picks, skin)
@@ -266,7 +266,7 @@ def preview_window(motion: Motion, result: PipelineResult, *, start: float = 0.0
     """Output frames ``[begin, end)``: from ``start`` seconds into the motion (past the rest-pose
     frames the output kept) for ``seconds`` (default: to the end)."""
     check_number("start", start, 0.0, math.inf)
-    first = result.rest_frames if not result.rest_frames_dropped else 0
+    first = result.first
     total = result.world_positions.shape[0]
     begin = first + start / motion.frame_time  # a float until it is known to be a frame: start may be inf
     if begin >= total - 0.5:
@@ -374,7 +374,7 @@ def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
                     color=ink)
         panels.append((ax, polygons, corners, vertices, faces, color))
     label = figure.text(0.5, 3 / height_px, "", ha="center", va="bottom", fontsize=8, color=(0.3, 0.3, 0.3))
-    first = result.rest_frames if not result.rest_frames_dropped else 0
+    first = result.first
     chunk = 32
     for begin in range(0, len(frames), chunk):
         shaded = [_shaded(vertices[begin:begin + chunk], faces, bodies.axes, color)
