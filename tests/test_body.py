@@ -3,8 +3,6 @@ together, that stays joined to its skeleton over the captured and the exaggerate
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 import trimesh
@@ -171,14 +169,3 @@ def test_a_lone_root_is_a_ball():
     body = default_skin(_star(0))
     mesh = trimesh.Trimesh(body.vertices, body.faces, process=False)
     assert mesh.is_watertight and mesh.volume > 0 and np.all(body.joints == 0)
-
-
-def test_a_body_costs_milliseconds():
-    """It runs for every clip of a batch; the welded union took about 0.06 s, this about 0.003 s."""
-    skeleton = read_bvh(SAMPLE_CLIPS[0])[0].skeleton
-    rigid = build_hierarchy(skeleton).rigid
-    default_skin(skeleton, rigid)
-    start = time.perf_counter()
-    for _ in range(5):
-        default_skin(skeleton, rigid)
-    assert (time.perf_counter() - start) / 5 < 0.05
