@@ -38,7 +38,7 @@ def cli_reference() -> str:
            "command's name, and `-h`/`--help`. Exit codes: 0 done; 1 a file could not be read or written for a "
            "reason outside the options, or some of several clips failed; 2 bad input, a bad option or a "
            "refusal.\n"]
-    root = click.Context(cli, info_name="mocap-exaggerate")
+    root = click.Context(cli, info_name="mocap-exaggerate", **cli.context_settings)
     for name in cli.list_commands(root):
         command = cli.get_command(root, name)
         context = click.Context(command, info_name=name, parent=root)
