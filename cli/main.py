@@ -106,6 +106,8 @@ def _parse_settings(ctx, param, values: tuple[str, ...]) -> dict[str, Any]:
         path = [part.strip() for part in key.split(".")]
         if not sep or len(path) < 2 or not all(re.fullmatch(r"[A-Za-z_][\w*?\[\]-]*", part) for part in path):
             raise click.BadParameter(f"{_shown(item)} is not KEY=VALUE with a dotted key (e.g. springs.blend=0.3)")
+        if len(text) > 1000:  # also keeps TOML's numbers under Python's 4,300-digit limit
+            raise click.BadParameter(f"{_shown(item)}: the value is {len(text)} characters; a setting is short")
         try:
             value = tomllib.loads(f"v = {text.strip()}")["v"]
         except tomllib.TOMLDecodeError:

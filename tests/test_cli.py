@@ -362,6 +362,7 @@ def test_set_reaches_any_setting_and_the_named_flags_win(tmp_path):
     ("x=1", "dotted key"), ("springs", "dotted key"), ("springs.nope=1", "unknown key springs.nope"),
     ("springs.blend=2", "springs.blend must be"), ("nope.blend=1", "unknown block"),
     ("extrapolate.max_speed=1e999", "max_speed"), ("springs.blend=[1,2]", "springs.blend"),
+    ("springs.blend=" + "9" * 5000, "characters"), ("springs.blend=" + "x" * 5000, "characters"),
 ])
 def test_a_bad_set_is_one_line_and_writes_nothing(tmp_path, setting, says):
     out = tmp_path / "out"
