@@ -175,6 +175,20 @@ def write_reference(folder: Path) -> list[Path]:
     return written
 
 
+def main(argv: list[str]) -> int:
+    folder = Path(argv[0] if argv else "docs/reference")
+    if len(argv) > 1 or (folder.exists() and not folder.is_dir()):
+        print(f"Error: usage: python -m mocap_exaggerate_cli.reference [FOLDER]; {folder} is not a folder",
+              file=sys.stderr)
+        return 2
+    try:
+        for path in write_reference(folder):
+            print(f"wrote {path}")
+    except OSError as error:
+        print(f"Error: {folder}: cannot write there ({error.strerror or error})", file=sys.stderr)
+        return 2
+    return 0
+
+
 if __name__ == "__main__":
-    for path in write_reference(Path(sys.argv[1] if len(sys.argv) > 1 else "docs/reference")):
-        print(f"wrote {path}")
+    sys.exit(main(sys.argv[1:]))

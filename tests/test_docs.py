@@ -178,3 +178,12 @@ def test_every_link_in_the_docs_leads_somewhere():
 
 def test_the_readme_stays_short():
     assert len((ROOT / "README.md").read_text(encoding="utf-8").splitlines()) <= 200
+
+
+@pytest.mark.parametrize("target", ["afile", "/dev/null"])
+def test_the_reference_generator_refuses_a_file_in_one_line(tmp_path, target):
+    (tmp_path / "afile").write_text("keep")
+    done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.reference", target], cwd=tmp_path,
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1 and "Traceback" not in done.stderr
+    assert (tmp_path / "afile").read_text() == "keep"
