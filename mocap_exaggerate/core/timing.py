@@ -79,7 +79,7 @@ def parse_frame(value: str | float | int, frame_time: float, *, what: str) -> in
 
 
 
-def gaussian_average(world_pos: np.ndarray, sigma: float, *, axis: int = 0) -> np.ndarray:
+def gaussian_average(world_pos: np.ndarray, sigma: float, *, axis: int = 0, ends: str = "reflect") -> np.ndarray:
     """Gaussian average along time with point-reflected ends.
 
     The trajectory is extended past each end by reflecting it through the end
@@ -89,13 +89,18 @@ def gaussian_average(world_pos: np.ndarray, sigma: float, *, axis: int = 0) -> n
 
     world_pos : (F, ...) float64, time along ``axis``
     sigma : standard deviation in frames; 0 returns a copy
+    ends : ``reflect`` (point reflection, as above) or ``nearest`` (the end value held,
+        as ``scipy.ndimage.gaussian_filter1d(mode="nearest")``: for values that are not
+        positions, such as a twist angle fading to 0)
     """
     world_pos = np.asarray(world_pos, dtype=np.float64)
     if sigma <= 0 or world_pos.shape[axis] < 2:
         return world_pos.copy()
     radius = int(4.0 * sigma + 0.5)
     moved = np.moveaxis(world_pos, axis, 0)
-    padded = np.pad(moved, [(radius, radius)] + [(0, 0)] * (moved.ndim - 1), mode="reflect", reflect_type="odd")
+    edges = [(radius, radius)] + [(0, 0)] * (moved.ndim - 1)
+    padded = np.pad(moved, edges, mode="edge") if ends == "nearest" else np.pad(moved, edges, mode="reflect",
+                                                                                 reflect_type="odd")
     return np.moveaxis(_convolve_gaussian(padded, sigma, radius), 0, axis)
 
 

@@ -28,7 +28,7 @@ import numpy as np
 from ..core.kinematics import local_from_world
 from ..core.motion import Motion
 from ..core.rotations import quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow, quat_rotate, quat_slerp
-from ..core.timing import smootherstep, step_gain
+from ..core.timing import gaussian_average, smootherstep, step_gain
 from .subjoints import SubjointHierarchy, link_starts, riders
 
 __all__ = ["recover_orientations", "curve_frames", "motion_from_world", "incoming_joint"]
@@ -294,9 +294,7 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
     fold = np.sum(pointing * axis, axis=-1) / np.maximum(np.linalg.norm(pointing, axis=-1), 1e-300)
     angle *= (smootherstep((fold - _FOLDED) / (_UNFOLDED - _FOLDED))
               * smootherstep((np.pi - np.abs(angle)) / (np.pi - _TWIST_FADE)))
-    from scipy.ndimage import gaussian_filter1d  # here, so the command line starts without SciPy
-
-    angle = gaussian_filter1d(angle, 1.0, axis=0, mode="nearest")  # where the fades pass quickly, over a few frames
+    angle = gaussian_average(angle, 1.0, ends="nearest")  # where the fades pass quickly, over a few frames
     for k in range(1, int(cuts.max())):
         on = np.flatnonzero(cuts > k)
         joint = starts[on] + k
