@@ -67,7 +67,7 @@ def near(flags: np.ndarray, w: int) -> np.ndarray:
 
 
 def measure(result, cap: np.ndarray, ctx: dict, seconds: float) -> dict:
-    first = 0 if result.rest_frames_dropped else result.rest_frames
+    first = result.first
     out = result.world_positions[first:]
     height = ctx["sign"] * out[..., ctx["u"]]
     below = ctx["floor"] - height

@@ -21,14 +21,16 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from common import ROOT, SHARED  # same folder: run as python bench/golden.py
+
 PRESETS = ("default", "subtle", "cartoon", "looney")
-VOLATILE = {"timings", "elapsed_s", "timings_ms", "version", "created", "started", "finished", "python", "platform"}
+#: What a manifest may change between identical runs (jobs/outputs.py: the timings; the version across releases).
+VOLATILE = {"timings", "version"}
 
 
 def clips(data: Path) -> list[Path]:
     found = sorted((ROOT / "sample_data").glob("*.bvh"))
-    for folder in (data / "bvh", data / "bvh" / "wide"):
+    for folder in (data, data / "wide"):
         found += sorted(folder.glob("*.bvh")) if folder.is_dir() else []
     return found
 
@@ -65,7 +67,7 @@ def main() -> int:
     mode = parser.add_mutually_exclusive_group(required=True)
     mode.add_argument("--write", type=Path)
     mode.add_argument("--check", type=Path)
-    parser.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data")
+    parser.add_argument("--data", type=Path, default=SHARED, help="the shared clips (bvh/ beside the checkout)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--presets", default=",".join(PRESETS))
     args = parser.parse_args()
