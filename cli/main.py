@@ -21,7 +21,14 @@ import click
 
 # Only light modules at import time: `--help` must not wait for SciPy, trimesh or pygltflib.
 from mocap_exaggerate import __version__
-from mocap_exaggerate.config import DEFAULT_PRESET, preset_description, preset_names, read_config_text, resolve_config
+from mocap_exaggerate.config import (
+    DEFAULT_PRESET,
+    merge_tables,
+    preset_description,
+    preset_names,
+    read_config_text,
+    resolve_config,
+)
 from mocap_exaggerate.core.errors import MocapError
 from mocap_exaggerate.io.files import OutputExistsError
 from mocap_exaggerate.jobs.batch import DEFAULT_GLOB
@@ -264,14 +271,7 @@ def _overrides(p: dict[str, Any]) -> dict[str, Any]:
     if p["weights"]:
         table["extrapolate"]["weights"] = dict(p["weights"])
     flags = {k: v for k, v in table.items() if v}
-    return _merge_tables(p.get("settings") or {}, flags)  # --set, then the flags over it
-
-
-def _merge_tables(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for key, value in over.items():
-        out[key] = _merge_tables(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
-    return out
+    return merge_tables(p.get("settings") or {}, flags)  # --set, then the flags over it
 
 
 def _length(value: str | None) -> float | str | None:

@@ -35,6 +35,7 @@ __all__ = [
     "preset_description",
     "resolve_config",
     "read_config_text",
+    "merge_tables",
 ]
 
 DEFAULT_PRESET = "cartoon"
@@ -310,11 +311,12 @@ def preset_description(name: str) -> str:
     return str(_preset_table(name).get("description", ""))
 
 
-def _merge(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+def merge_tables(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+    """``top`` over ``base``, table by table (copies; neither is changed)."""
     out = copy.deepcopy(base)
     for key, value in top.items():
         if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = _merge(out[key], value)
+            out[key] = merge_tables(out[key], value)
         else:
             out[key] = copy.deepcopy(value)
     return out
@@ -332,7 +334,7 @@ def resolve_config(
     if config_text is not None:
         file_table = _parse_toml(config_text, config_source)
         PipelineConfig.from_dict(file_table, source=config_source)  # name the file in its own errors
-        table = _merge(table, file_table)
+        table = merge_tables(table, file_table)
     if overrides:
-        table = _merge(table, overrides)
+        table = merge_tables(table, overrides)
     return PipelineConfig.from_dict(table, source=config_source if config_text is not None else "options")

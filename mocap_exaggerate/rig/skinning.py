@@ -187,7 +187,7 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
         nearest = np.full(len(block), np.inf)
         np.minimum.at(nearest, entry, distance)
         share = (np.maximum(nearest[entry], 1e-12) / np.maximum(distance, 1e-12)) ** 8
-        share *= _sibling_share(links, link, entry, point)
+        share *= _sibling_share(links, link, entry, point, distance)
         share = share / np.bincount(entry, share, minlength=len(block))[entry]
         share = np.where(share < 0.01, 0.0, share)
         share = share / np.bincount(entry, share, minlength=len(block))[entry]
@@ -218,7 +218,8 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
 _BLOCK_ROWS = 1_000_000
 
 
-def _sibling_share(links: _Links, link: np.ndarray, entry: np.ndarray, point: np.ndarray) -> np.ndarray:
+def _sibling_share(links: _Links, link: np.ndarray, entry: np.ndarray, point: np.ndarray,
+                   own: np.ndarray) -> np.ndarray:
     """How a share tied between coincident sibling links is split among them, by the links after them.
 
     Some rigs start the neck and both collars at one point (an Assimp chest, a
@@ -230,6 +231,8 @@ def _sibling_share(links: _Links, link: np.ndarray, entry: np.ndarray, point: np
     member only where it lies nearer that member's next link (the top of a
     shoulder, by the upper arm), by the same (nearest / distance)^8 rule; the
     group's total share is unchanged.
+
+    own : each row's distance to its own link, as the caller measured it
     """
     factor = np.ones(len(link))
     group = links.group[link]
@@ -238,8 +241,7 @@ def _sibling_share(links: _Links, link: np.ndarray, entry: np.ndarray, point: np
         return factor
     distance = segment_distance(point[tied], links.probe_head[link[tied]], links.probe_tail[link[tied]])
     main = links.straightest[link[tied]]
-    own = segment_distance(point[tied][main], links.head[link[tied][main]], links.tail[link[tied][main]])
-    distance[main] = np.minimum(distance[main], own)
+    distance[main] = np.minimum(distance[main], own[tied][main])
     _, key = np.unique(entry[tied] * (int(links.group.max()) + 1) + group[tied], return_inverse=True)
     nearest = np.full(key.max() + 1, np.inf)
     np.minimum.at(nearest, key, distance)
