@@ -27,10 +27,10 @@ collect_ignore = ["blender"]
 _KINDS = {
     "external": ("MOCAP_BPY_PYTHON", "blender", "validator", "validate_glb", "playwright", "chromium"),
     "process": ("subprocess", "sys.executable", "Popen", "ProcessPool", "LocalCluster", "scheduler", "jobs=2",
-                "\"-j\"", "'-j'", "run_cli", "_run(", "signal."),
+                "\"-j\"", "'-j'", "run_cli", "signal."),
     "cli": ("CliRunner", "invoke(", "cli.main", "mocap_exaggerate_cli", "run_cli"),
     "realdata": ("shared(", "SHARED", "shared_clip_params", "all_clip_params", "makehuman", "MakeHuman",
-                 "data/gltf", "data/skin", "wide"),
+                 "data/gltf", "data/skin", "SHARED_BVH / \"wide\"", "\"wide/"),
 }
 
 
