@@ -241,40 +241,7 @@ def output_options(func: Callable) -> Callable:
     return func
 
 
-def _overrides(p: dict[str, Any]) -> dict[str, Any]:
-    table: dict[str, dict[str, Any]] = {
-        "input": {}, "extrapolate": {}, "correct": {}, "subjoints": {}, "springs": {}, "output": {},
-        "auto_stretch": {}, "contacts": {},
-    }
-    pairs = [
-        ("input", "tpose", p["tpose"]), ("input", "fps", p["fps"]),
-        ("input", "root_offset", p["root_offset"]), ("input", "up", p["up"]),
-        ("extrapolate", "enabled", p["extrapolate_on"]), ("extrapolate", "sigma", p["sigma"]),
-        ("extrapolate", "omega", p["omega"]),
-        ("correct", "enabled", p["correct_on"]), ("correct", "threshold", p["threshold"]),
-        ("correct", "delta", p["delta"]), ("correct", "max_stretch", p["max_stretch"]),
-        ("correct", "max_iter", p["max_iter"]),
-        ("subjoints", "enabled", False if p["subjoints_off"] else None), ("subjoints", "per_link", p["per_link"]),
-        ("subjoints", "sublink_length", _length(p["sublink_length"])),
-        ("springs", "enabled", p["springs_on"]), ("springs", "stiffness", p["stiffness"]),
-        ("springs", "link_stiffness", p["link_stiffness"]), ("springs", "damping", p["damping"]),
-        ("springs", "blend", p["blend"]),
-        ("output", "skeleton", p["skeleton_mode"]), ("output", "bvh_positions", p["bvh_positions"]),
-        ("output", "preserve_volume", p["preserve_volume"]),
-        ("auto_stretch", "enabled", p["auto_stretch_on"]),
-        ("contacts", "enabled", None if p["contacts_mode"] is None else p["contacts_mode"] == "auto"),
-        ("contacts", "anchor", p["anchor"]), ("contacts", "floor", p["floor_on"]),
-    ]
-    for block, key, value in pairs:
-        if value is not None:
-            table[block][key] = value
-    if p["weights"]:
-        table["extrapolate"]["weights"] = dict(p["weights"])
-    flags = {k: v for k, v in table.items() if v}
-    return merge_tables(p.get("settings") or {}, flags)  # --set, then the flags over it
-
-
-def _length(value: str | None) -> float | str | None:
+def _length_value(value: str | None) -> float | str | None:
     """A --sublink-length value: a number of skeleton units, or a share such as '3%'."""
     if value is None or value.strip().endswith("%"):
         return value
@@ -282,6 +249,41 @@ def _length(value: str | None) -> float | str | None:
         return float(value)
     except ValueError:
         return value  # the config names it in its error
+
+
+#: Which setting each pipeline option sets: (option's parameter name, block, key, how its value is read).
+#: One table for the options and for the settings reference (cli/reference.py).
+FLAG_KEYS: tuple[tuple[str, str, str, Callable[[Any], Any]], ...] = tuple(
+    (name, block, key, read) for name, block, key, read in [
+        ("tpose", "input", "tpose", None), ("fps", "input", "fps", None),
+        ("root_offset", "input", "root_offset", None), ("up", "input", "up", None),
+        ("extrapolate_on", "extrapolate", "enabled", None), ("sigma", "extrapolate", "sigma", None),
+        ("omega", "extrapolate", "omega", None), ("weights", "extrapolate", "weights", lambda v: dict(v) or None),
+        ("correct_on", "correct", "enabled", None), ("threshold", "correct", "threshold", None),
+        ("delta", "correct", "delta", None), ("max_stretch", "correct", "max_stretch", None),
+        ("max_iter", "correct", "max_iter", None),
+        ("subjoints_off", "subjoints", "enabled", lambda v: False if v else None),
+        ("per_link", "subjoints", "per_link", None), ("sublink_length", "subjoints", "sublink_length", _length_value),
+        ("springs_on", "springs", "enabled", None), ("stiffness", "springs", "stiffness", None),
+        ("link_stiffness", "springs", "link_stiffness", None), ("damping", "springs", "damping", None),
+        ("blend", "springs", "blend", None),
+        ("skeleton_mode", "output", "skeleton", None), ("bvh_positions", "output", "bvh_positions", None),
+        ("preserve_volume", "output", "preserve_volume", None),
+        ("auto_stretch_on", "auto_stretch", "enabled", None),
+        ("contacts_mode", "contacts", "enabled", lambda v: None if v is None else v == "auto"),
+        ("anchor", "contacts", "anchor", None), ("floor_on", "contacts", "floor", None),
+    ]
+)
+
+
+def _overrides(p: dict[str, Any]) -> dict[str, Any]:
+    """The settings the options given set, as nested tables: ``--set`` first, the named flags over it."""
+    flags: dict[str, dict[str, Any]] = {}
+    for name, block, key, read in FLAG_KEYS:
+        value = p[name] if read is None else read(p[name])
+        if value is not None:
+            flags.setdefault(block, {})[key] = value
+    return merge_tables(p.get("settings") or {}, flags)
 
 
 def _config_from_options(p: dict[str, Any]):

@@ -20,7 +20,7 @@ import click
 
 from mocap_exaggerate.config import PipelineConfig, load_preset, preset_names
 
-from .main import _overrides, cli
+from .main import FLAG_KEYS, cli
 
 __all__ = ["cli_reference", "config_reference", "write_reference"]
 
@@ -88,31 +88,10 @@ def _field_docs(cls: type) -> dict[str, str]:
 
 
 def _flags() -> dict[str, str]:
-    """Setting key -> the flag that sets it, found by setting each pipeline option alone."""
+    """Setting key -> the flag that sets it, from the command line's own table (`main.FLAG_KEYS`)."""
     command = cli.get_command(click.Context(cli), "exaggerate")
-    params = [p for p in command.params if isinstance(p, click.Option)]
-    blank: dict[str, Any] = {p.name: (() if p.multiple else (False if p.is_flag and not p.secondary_opts else None))
-                             for p in params}
-    found: dict[str, str] = {}
-    for param in params:
-        probe = dict(blank)
-        if param.name == "weights":
-            probe[param.name] = (("x", 1.0),)
-        elif param.is_flag:
-            probe[param.name] = True
-        elif isinstance(param.type, click.Choice):
-            probe[param.name] = param.type.choices[0]
-        else:
-            probe[param.name] = "1"
-        try:
-            table = _overrides(probe)
-        except (KeyError, TypeError, ValueError):
-            continue
-        for block, values in table.items():
-            for key in values:
-                flag = "/".join(param.opts + param.secondary_opts)
-                found.setdefault(f"{block}.{key}", flag)
-    return found
+    options = {p.name: "/".join(p.opts + p.secondary_opts) for p in command.params if isinstance(p, click.Option)}
+    return {f"{block}.{key}": options[name] for name, block, key, _ in FLAG_KEYS}
 
 
 def _toml(value: Any) -> str:
