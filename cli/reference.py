@@ -5,7 +5,7 @@
 `tests/test_docs.py` checks the committed pages equal what this prints, so the reference
 never drifts from the code. The settings page reads each block's dataclass (its fields,
 defaults and the docstring lines that describe them), the shipped presets, and which flag
-sets each key, found by asking the command line's own option-to-setting function.
+sets each key, from the command line's own table of them (`main.FLAG_KEYS`).
 """
 
 from __future__ import annotations
