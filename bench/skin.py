@@ -317,12 +317,12 @@ def makehuman():
 def measure_rig(task: tuple) -> list[dict]:
     """Rows (one per setting x body) of one clip."""
     path, rig, settings, bodies, cut, step = task
+    from mocap_exaggerate.analysis.branches import minor_branches
     from mocap_exaggerate.io.bvh import read_bvh
     from mocap_exaggerate.jobs.outputs import base_skin, output_skin, output_thickness
     from mocap_exaggerate.pipeline import run
     from mocap_exaggerate.rig.binding import bind_skin
     from mocap_exaggerate.rig.body import default_skin
-    from mocap_exaggerate.stages.subjoints import minor_branches
 
     motion, _ = read_bvh(Path(path), fps=FPS.get(Path(path).name))
     if cut:

@@ -139,7 +139,7 @@ def test_root_weight_zero_keeps_every_rig_within_the_presets_stretch(path):
 def test_a_weight_on_a_root_with_a_welded_pelvis_moves_both():
     """iClone's CC_Base_Pelvis sits on CC_Base_Hip (a link of 0.07 mm). A weight given to the hip
     alone once opened that link into 9 cm (138,445x); welded joints now share their weight."""
-    from mocap_exaggerate.pipeline import resolve_weights, welded
+    from mocap_exaggerate.stages.extrapolate import resolve_weights, welded
 
     motion, _ = read_bvh(shared("cmu_06_15_basketball_dribble_shoot_iclone.bvh"))
     skeleton = motion.skeleton

@@ -102,8 +102,8 @@ class Row:
 def captured_row(motion, bound, meters: float, up: tuple[int, float]) -> Row:
     """The clip as read, on its own skeleton, with every influence of the binding (``bench/skin.py``'s
     reference); written by the GLB writer itself, as the run's GLBs are."""
+    from mocap_exaggerate.analysis.branches import minor_branches
     from mocap_exaggerate.io.gltf import glb_pieces
-    from mocap_exaggerate.stages.subjoints import minor_branches
 
     rotations, positions = motion.forward_kinematics()
     glb = b"".join(glb_pieces(motion, bound, meters_per_unit=meters, up=up))
@@ -112,9 +112,9 @@ def captured_row(motion, bound, meters: float, up: tuple[int, float]) -> Row:
 
 def output_row(motion, config, skin=None) -> Row:
     """A run's GLB (``make_glb``, with ``skin`` or the default body) and its skin on the output skeleton."""
+    from mocap_exaggerate.analysis.branches import minor_branches
     from mocap_exaggerate.jobs.outputs import base_skin, make_glb, output_skin, output_thickness
     from mocap_exaggerate.pipeline import run
-    from mocap_exaggerate.stages.subjoints import minor_branches
 
     result = run(motion, config)
     rotations, positions = result.motion.forward_kinematics()  # what the GLB's tracks give

@@ -107,14 +107,15 @@ def test_toes_keep_to_the_speed_limit_their_foot_keeps():
     Before, the amc2bvh jump's toes moved 1.7x their captured top speed under a 1.5x limit
     (the shin swung the foot round faster than anything checked).
     """
-    from mocap_exaggerate.pipeline import _uncut_hierarchy, rider_joints
+    from mocap_exaggerate.analysis.branches import rider_joints
     from mocap_exaggerate.stages.extrapolate import extrapolate
     from mocap_exaggerate.stages.orient import recover_orientations
+    from mocap_exaggerate.stages.state import uncut_hierarchy
 
     motion = read_bvh(SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh", fps=120.0)[0]
     skeleton = motion.skeleton
     rot, pos = motion.world_rotations(), motion.world_positions()
-    hierarchy = _uncut_hierarchy(skeleton)
+    hierarchy = uncut_hierarchy(skeleton)
     top = np.linalg.norm(np.diff(pos, axis=0), axis=-1).max(axis=0)
     moving = hierarchy.rigid & (top > 1e-3 * skeleton.height())
     assert moving.sum() >= 2  # the toes

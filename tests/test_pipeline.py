@@ -12,7 +12,8 @@ from mocap_exaggerate.config import PipelineConfig, load_preset, preset_names, r
 from mocap_exaggerate.core.errors import ConfigError
 from mocap_exaggerate.core.rotations import quat_angle
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh
-from mocap_exaggerate.pipeline import prepare, resolve_weights, run
+from mocap_exaggerate.pipeline import prepare, run
+from mocap_exaggerate.stages.extrapolate import resolve_weights
 
 from .helpers import SAMPLE_DIR as ROOT_SAMPLE
 from .helpers import all_clip_params, shared, shared_clip_params
@@ -290,7 +291,7 @@ def test_a_smoothing_wider_than_the_band_is_said_and_the_link_figure_skips_place
     result = run(motion, replace(config, extrapolate=replace(config.extrapolate, sigma="0.02s", smooth="0.2s")))
     assert any("extrapolate.smooth" in note and "half of sigma" in note for note in result.notes)
     # A link a micrometre long (Reallusion's pelvis) moved a centimetre is not a 10,000x stretch.
-    from mocap_exaggerate.pipeline import max_link_stretch
+    from mocap_exaggerate.stages.correct import max_link_stretch
 
     parents = np.array([-1, 0, 1])
     lengths = np.array([0.0, 7e-5, 40.0])

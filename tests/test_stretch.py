@@ -51,7 +51,7 @@ def test_limb_length_at_the_final_frame_is_scale_times_the_original(boxing, scal
     before = limb_length(world, limb, last)
     after = limb_length(result.positions, limb, last)
     assert after == pytest.approx(scale * before, rel=1e-6)
-    if result.events[0]["axes_relaxed"]:
+    if result.events[0].axes_relaxed:
         # Only a squash can be out of reach of the chosen axes (see exaggerated_path).
         assert scale < 1
     # The rest of the body is untouched.
@@ -70,7 +70,7 @@ def test_stretches_never_need_to_relax_the_axes(boxing):
         for axes in AXES:
             spec = StretchSpec(limb="right_arm", start=1230, end=1251, scale=scale, axes=axes)
             result = apply_stretches(world, motion.skeleton, limbs, (spec,), motion.frame_time)
-            assert not result.events[0]["axes_relaxed"], axes
+            assert not result.events[0].axes_relaxed, axes
 
 
 def test_scale_one_and_blend_zero_are_the_identity(boxing):
@@ -156,7 +156,7 @@ def test_overlapping_ranges_on_one_limb_are_an_error(boxing):
                StretchSpec(limb="right_arm", start=100, end=140, scale=3),
                StretchSpec(limb="left_arm", start=300, end=340, scale=0.5))
     result = apply_stretches(world, motion.skeleton, limbs, several, motion.frame_time)
-    assert [e["limb"] for e in result.events] == ["left_arm", "right_arm", "left_arm"]
+    assert [e.limb for e in result.events] == ["left_arm", "right_arm", "left_arm"]
     with pytest.raises(ConfigError, match="no such limb"):
         apply_stretches(world, motion.skeleton, limbs, (StretchSpec(limb="tail", start=1, end=9, scale=2),), motion.frame_time)
     with pytest.raises(ConfigError, match="must lie within"):
@@ -199,7 +199,7 @@ pivot = "end"
     assert PipelineConfig.from_toml(config.to_toml()) == config
     motion, _ = read_bvh(sample_clip)
     result = run(motion, config)
-    assert [e["limb"] for e in result.stretch.events] == ["reach", "right_leg"]
+    assert [e.limb for e in result.stretch.events] == ["reach", "right_leg"]
     for bad, words in [("[[stretch]]\nlimb = 'x'\nstart = 1\n", "missing end, scale"),
                        ("[[stretch]]\nlimb = 'x'\nstart = 1\nend = 5\nscale = 9\n", "scale"),
                        ("[limbs]\narm = 'lHand'\n", "at least two joint names")]:
@@ -251,8 +251,8 @@ def test_auto_stretch_finds_the_punches_of_a_fight_by_their_shape():
     result = run(motion, resolve_config("looney", None, {"auto_stretch": {"enabled": True}}))
     events = result.stretch.events
     found = [(limb, frame) for limb, frames in PUNCHES.items() for frame in frames
-             if any(e["limb"] == limb and e["frames"][0] - 3 <= frame <= e["frames"][1] + 3 for e in events)]
-    assert len(found) >= 0.8 * 10, (found, [(e["limb"], e["frames"]) for e in events])
+             if any(e.limb == limb and e.frames[0] - 3 <= frame <= e.frames[1] + 3 for e in events)]
+    assert len(found) >= 0.8 * 10, (found, [(e.limb, e.frames) for e in events])
     assert len(events) <= len(found) + 2  # and little else
     # The style's scale is the reach the strike ends at (2 arm lengths at looney), not a factor on
     # top of the exaggeration (which had the arm at 1.4-1.6 already: 2x made 3x).
@@ -260,9 +260,9 @@ def test_auto_stretch_finds_the_punches_of_a_fight_by_their_shape():
     limbs = find_limbs(skeleton)
     out = result.world_positions[:, result.original_index]
     for event in events:
-        limb, key = limbs[event["limb"]], event["frames"][1]
+        limb, key = limbs[event.limb], event.frames[1]
         full = sum(skeleton.link_lengths()[j] for j in limb.joints[1:])
-        assert event["reach"] == 2.0 and 1.0 <= event["scale"] <= 5.0
+        assert event.reach == 2.0 and 1.0 <= event.scale <= 5.0
         assert np.linalg.norm(out[key, limb.end] - out[key, limb.base]) / full == pytest.approx(2.0, rel=0.01)
 
 
@@ -283,14 +283,14 @@ def test_a_clip_made_only_of_punches_still_has_its_punches_found():
 def test_auto_stretch_finds_kicks_and_throws_and_leaves_walks_alone(clip, expected):
     motion, _ = read_bvh(shared(clip))
     result = run(motion, resolve_config("looney", None, {"auto_stretch": {"enabled": True}, "springs": {"enabled": False}}))
-    found = {e["limb"] for e in result.stretch.events} if result.stretch else set()
+    found = {e.limb for e in result.stretch.events} if result.stretch else set()
     assert found == expected
     if clip.startswith("cmu_10_01"):
         (kick,) = result.stretch.events
-        assert 570 <= kick["frames"][1] <= 620  # the kick in CMU 10_01 lands around frame 600
+        assert 570 <= kick.frames[1] <= 620  # the kick in CMU 10_01 lands around frame 600
     if clip.startswith("cmu_06_15"):
         (shot,) = result.stretch.events
-        assert 160 <= shot["frames"][1] <= 190  # the shooting arm straightens as the ball leaves
+        assert 160 <= shot.frames[1] <= 190  # the shooting arm straightens as the ball leaves
 
 
 def test_a_release_leaves_the_peak_at_the_speed_it_arrived_and_comes_to_rest():
@@ -315,7 +315,7 @@ def test_a_stretched_kick_lets_go_without_a_pop():
     plain = run(motion, resolve_config("looney", None, {}))
     (kick,) = result.stretch.events
     foot = result.original_index[find_limbs(motion.skeleton)["right_leg"].end]
-    after = slice(kick["frames"][1], kick["frames"][1] + 30)  # the key frame and the release after it
+    after = slice(kick.frames[1], kick.frames[1] + 30)  # the key frame and the release after it
 
     def accel(r):
         p = r.world_positions[after, foot]

@@ -229,3 +229,30 @@ def standing_up(skeleton: Skeleton, world: np.ndarray) -> tuple[int, float]:
         return axis, 1.0
     height = np.median(world[:, top, axis] - world[:, feet, axis].mean(axis=1))
     return axis, -1.0 if height < 0 else 1.0
+
+
+def limb_hinges(skeleton: Skeleton, limbs: dict) -> list[tuple[int, ...]]:
+    """(base, middle, end) of every arm and leg, and for a leg its longest toe after them."""
+    hinges = []
+    lengths = skeleton.link_lengths()
+    for name, limb in limbs.items():
+        if name.endswith(("_arm", "_leg")) and len(limb.joints) >= 3:
+            toes = [int(c) for c in skeleton.children(limb.joints[2])] if name.endswith("_leg") else []
+            reach = [lengths[c] for c in toes]
+            hinges.append(tuple(limb.joints[:3]) + ((toes[int(np.argmax(reach))],) if toes and max(reach) > 0 else ()))
+    return hinges
+
+
+def torso_joints(skeleton: Skeleton, limbs: dict) -> np.ndarray:
+    """The torso: the spine chain and everything above it (neck, head, collars, shoulder balls), not the arms.
+
+    With no spine found, the neck chain (and what hangs off it) if there is one.
+    """
+    base = limbs["spine"].base if "spine" in limbs else limbs["neck"].base if "neck" in limbs else None
+    if base is None:
+        return np.zeros(0, dtype=np.int64)
+    torso = set(skeleton.descendants(base).tolist()) | {base}
+    for name, limb in limbs.items():
+        if name.endswith("_arm"):  # the arm below its shoulder ball: twist and share bones too
+            torso -= set(skeleton.descendants(limb.base).tolist()) - {limb.base}
+    return np.array(sorted(torso), dtype=np.int64)

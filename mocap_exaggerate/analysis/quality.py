@@ -59,15 +59,12 @@ def still_frames(captured: np.ndarray, frame_time: float, height: float) -> np.n
     return out
 
 
-def _path(parents: np.ndarray, base: int, end: int) -> list[int]:
+def _path(skeleton, base: int, end: int) -> list[int]:
     """Joints from ``end`` up to (not including) ``base``: each ends one link of the path."""
-    path, joint = [], end
-    while joint != base and joint >= 0:
-        path.append(joint)
-        joint = int(parents[joint])
-    if joint != base:
+    above = skeleton.ancestors(end)
+    if base not in above:
         raise ValueError("base is not above end")
-    return path
+    return above[:above.index(base)]
 
 
 def motion_quality(motion: Motion, result) -> dict:
@@ -106,10 +103,10 @@ def motion_quality(motion: Motion, result) -> dict:
     rest = skeleton.link_lengths()
     stretch = {}
     for name, limb in find_limbs(skeleton).items():
-        rest_length = sum(rest[j] for j in _path(skeleton.parents, limb.base, limb.end))
+        rest_length = sum(rest[j] for j in _path(skeleton, limb.base, limb.end))
         if rest_length <= 1e-6 * h:
             continue
-        chain = _path(out_skeleton.parents, int(result.original_index[limb.base]), int(result.original_index[limb.end]))
+        chain = _path(out_skeleton, int(result.original_index[limb.base]), int(result.original_index[limb.end]))
         length = np.linalg.norm(out_all[:, chain] - out_all[:, out_skeleton.parents[chain]], axis=-1).sum(axis=1)
         ratio = length / rest_length
         stretch[name] = {"peak": float(ratio.max()), "p95": float(np.percentile(ratio, 95)),

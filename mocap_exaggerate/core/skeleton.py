@@ -100,6 +100,14 @@ class Skeleton:
             inside[j] = inside[self.parents[j]]
         return np.flatnonzero(inside)
 
+    def ancestors(self, joint: int) -> list[int]:
+        """``joint`` and every joint above it, up to the root, in that order."""
+        out = []
+        while joint >= 0:
+            out.append(int(joint))
+            joint = int(self.parents[joint])
+        return out
+
     def depth(self) -> np.ndarray:
         """Number of links from the root to each joint, ``(J,)``."""
         depth = np.zeros(self.num_joints, np.int64)

@@ -76,7 +76,7 @@ def manifest(
     if result.substeps:
         info["result"]["spring_substeps"] = result.substeps
     if result.stretch is not None:
-        info["result"]["stretch"] = result.stretch.events
+        info["result"]["stretch"] = [event.to_dict() for event in result.stretch.events]
     if result.constraints is not None:
         info["result"]["constraints"] = result.constraints
     if result.correct_report is not None:

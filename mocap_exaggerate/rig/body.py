@@ -67,14 +67,14 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
         torso and a round head
     rigid : (J,) bool, joints (fingers, toes, face, twist bones) that get no piece of
         their own but ride on their nearest non-rigid ancestor's; default
-        `mocap_exaggerate.stages.subjoints.minor_branches`, as the pipeline prunes them
+        `mocap_exaggerate.analysis.branches.minor_branches`, as the pipeline prunes them
 
     Returns a `Skin` made of closed, outward-facing tubes, one per run of links, in the rest
     pose; a vertex has one influence, or two near a joint where a tube bends (padded to four
     columns).
     """
+    from ..analysis.branches import minor_branches
     from ..analysis.limbs import find_limbs
-    from ..stages.subjoints import minor_branches
 
     rigid = minor_branches(skeleton) if rigid is None else np.asarray(rigid, dtype=bool)
     count = skeleton.num_joints
@@ -120,7 +120,7 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     limbs = find_limbs(skeleton)
     if "spine" in limbs:  # the links from the root up to the neck base
         torso = np.zeros(count, bool)
-        torso[_ancestors(parents, limbs["spine"].end)] = True
+        torso[skeleton.ancestors(limbs["spine"].end)] = True
         trunk = (child > 0) & torso[np.maximum(child, 0)]
         radius[trunk] = np.maximum(radius[trunk], TORSO_RADIUS * height)
         # The torso's round top ends at the neck base instead of swallowing the neck.
@@ -327,15 +327,6 @@ _HAND_OVER = 2.0
 _EASE = 0.35
 #: Pieces meeting at a sharper angle than this (degrees, in the rest pose) are separate tubes.
 MAX_BEND = 60.0
-
-
-def _ancestors(parents: np.ndarray, joint: int) -> list[int]:
-    """``joint`` and every joint above it up to the root."""
-    out = []
-    while joint >= 0:
-        out.append(int(joint))
-        joint = parents[joint]
-    return out
 
 
 def _capsules(start: np.ndarray, end: np.ndarray, radius: np.ndarray, around: int, rings: int):

@@ -34,16 +34,22 @@ reach.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
-from typing import NamedTuple
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
+from ..analysis.branches import incoming_joint, rider_joints, rubber_groups
 from ..analysis.limbs import Limb
 from ..core.errors import ConfigError, check_choice, check_flag, check_number
 from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
 from ..core.skeleton import Skeleton
 from ..core.timing import check_duration, parse_duration, parse_frame, smootherstep, spread_max
+from .state import Pins
+from .subjoints import even_out
+
+if TYPE_CHECKING:
+    from .state import State, StretchKey
 
 __all__ = [
     "ContactConfig",
@@ -56,6 +62,8 @@ __all__ = [
     "detect_contacts",
     "find_contacts",
     "constrain",
+    "ConstraintPlan",
+    "constraints_stage",
     "contact_weights",
     "run_ramps",
     "ease_lengths",
@@ -576,19 +584,6 @@ def two_bone_ik(base: np.ndarray, middle: np.ndarray, end: np.ndarray, target: n
 # ---------------------------------------------------------------------------- the block
 
 
-class StretchKey(NamedTuple):
-    """A stretch's promise: at ``frame`` the limb's end lies at ``vectors[frame]`` from its base.
-
-    vectors : (F, 3) float64 end minus base as the stretch pass left them (eased toward around the frame)
-    """
-
-    limb: str
-    base: int
-    end: int
-    frame: int
-    vectors: np.ndarray
-
-
 class ConstraintResult(NamedTuple):
     """What the block did.
 
@@ -630,7 +625,6 @@ def constrain(
     targets: tuple[tuple[TargetSpec, int], ...] = (),
     keys: tuple[StretchKey, ...] = (),
     groups: tuple[tuple[int, ...], ...] = (),
-    incoming=None,
     max_speed: float = 0.0,
     riders: dict[int, list[int]] | None = None,
 ) -> ConstraintResult:
@@ -642,7 +636,6 @@ def constrain(
     targets : (spec, frame) pairs, frames counted in ``sub_pos``
     keys : stretch keys, frames counted in ``sub_pos``
     groups : rubber groups of original joints (their ends are end effectors too)
-    incoming : ``joint -> joint`` whose link turns an end effector (as orientation recovery does)
     max_speed : the extrapolation's speed limit (times each joint's captured top speed): a foot
         easing onto its contact and the joints ``riders`` (joint -> rigid riders) keep to it too
         (`ease_lengths`); the ease adds at most the foot's captured top speed in any case (`run_ramps`)
@@ -708,7 +701,7 @@ def constrain(
         for joint, effector in effectors.items():
             # Lifting the end turns it (its incoming link moves), which moves its toes: a few rounds.
             for _ in range(4):
-                points = _effector_points(out, hierarchy, effector, captured_pos, captured_rot, incoming,
+                points = _effector_points(out, hierarchy, skeleton, effector, captured_pos, captured_rot,
                                           pins.get(joint))
                 lowest = ground.heights(points).min(axis=1)
                 lift = soft_floor(lowest, ground.floor, margin) - lowest
@@ -768,13 +761,14 @@ def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, 
     out[frames[:, None], chain[None, :]] = new
 
 
-def _effector_points(out, hierarchy, effector: Effector, captured_pos, captured_rot, incoming, pin) -> np.ndarray:
-    """Where the effector's joint and riders will be ``(F, P, 3)``, turned as orientation recovery will turn it."""
+def _effector_points(out, hierarchy, skeleton, effector: Effector, captured_pos, captured_rot, pin) -> np.ndarray:
+    """Where the effector's joint and riders will be ``(F, P, 3)``, turned as orientation recovery will turn it
+    (by the link into it, `incoming_joint`)."""
     joint = effector.joint
     position = out[:, hierarchy.original[joint]]
     if len(effector.points) == 1:
         return position[:, None]
-    above = incoming(joint) if incoming is not None else -1
+    above = incoming_joint(skeleton, joint)
     rotation = captured_rot[:, joint]
     if above >= 0:
         turn = quat_between(captured_pos[:, joint] - captured_pos[:, above],
@@ -785,3 +779,54 @@ def _effector_points(out, hierarchy, effector: Effector, captured_pos, captured_
     riders = list(effector.points[1:])
     local = quat_rotate(quat_inv(captured_rot[:, joint])[:, None], captured_pos[:, riders] - captured_pos[:, joint:joint + 1])
     return np.concatenate([position[:, None], position[:, None] + quat_rotate(rotation[:, None], local)], axis=1)
+
+
+# ---------------------------------------------------------------------------- the stage
+
+
+class ConstraintPlan(NamedTuple):
+    """The constraints stage's settings: contact detection and the floor, and the targets."""
+
+    contacts: ContactConfig
+    targets: tuple[TargetSpec, ...]
+
+
+def constraints_stage(state: State, plan: ConstraintPlan) -> State:
+    """The block: planted feet, targets, the stretches' promised lengths and the floor, on rubber positions.
+
+    Reads ``stretch_keys`` and ``speed_limit``; adds ``sub_positions``, ``pins`` and ``constraints``
+    (the manifest's report). Nothing to do without contacts, targets or a stretch stage.
+    """
+    if not plan.contacts.enabled and not plan.targets and state.stretch_keys is None:
+        return state
+    motion, first = state.motion, state.first
+    skeleton = motion.skeleton
+    hierarchy, positions = state.rubber()
+    targets = []
+    for spec in plan.targets:
+        frame = spec.frame_index(motion.frame_time, motion.num_frames)
+        if frame < first:
+            raise ConfigError(f"target {spec.joint}@{spec.frame}: frame {frame} is a rest-pose frame "
+                              f"(motion starts at {first})")
+        targets.append((spec, frame - first))
+    groups = hierarchy.groups or rubber_groups(skeleton, hierarchy.rigid)
+    result = constrain(
+        positions[first:], hierarchy, skeleton, state.limbs, state.captured_pos[first:], state.captured_rot[first:],
+        motion.frame_time, config=plan.contacts, targets=tuple(targets), keys=state.stretch_keys or (), groups=groups,
+        max_speed=state.speed_limit,
+        riders=rider_joints(skeleton),
+    )
+    out = positions.copy()
+    # The chains bent to meet their targets, with even sub-links again (each keeping its direction).
+    bent = [j for limb in state.limbs.values() for j in limb.joints[1:]]
+    out[first:] = even_out(result.positions, hierarchy, np.array(bent, dtype=np.int64))
+    weights = np.zeros((len(positions), len(result.pin_joints)))
+    weights[first:] = result.pin_weights
+    contacts = {name: [[int(a) + first, int(b) + first] for a, b in runs] for name, runs in result.contacts.items()}
+    report = {"contacts": contacts, "anchor": plan.contacts.anchor if plan.contacts.enabled else None,
+              "targets": [{**spec.to_dict(), "frame": frame + first} for spec, frame in targets],
+              "stretch_keys": [{**key, "frame": key["frame"] + first} for key in result.keys]}
+    if result.ground is not None:
+        report["floor"] = {"axis": "XYZ"[result.ground.axis], "up": "+" if result.ground.sign > 0 else "-",
+                           "height": round(result.ground.sign * result.ground.floor, 6)}
+    return replace(state, sub_positions=out, pins=Pins(result.pin_joints, weights), constraints=report)

@@ -36,14 +36,21 @@ smooth in time, keeping the guarantees:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..analysis.limbs import limb_hinges
 from ..core.errors import ConfigError, check_flag, check_number
-from ..core.timing import check_duration, smootherstep, spread_max
+from ..core.timing import check_duration, parse_duration, smootherstep, spread_max
+from .bends import keep_bends
 
-__all__ = ["CorrectConfig", "CorrectReport", "accent_stretch", "correct", "keep_bends", "stretch_error"]
+if TYPE_CHECKING:
+    from .state import State
+
+__all__ = ["CorrectConfig", "CorrectReport", "accent_stretch", "correct", "correct_stage", "max_link_stretch",
+           "stretch_error"]
 
 #: A threshold of 0 is reached only in the limit for delta < 1; stop this close to it.
 _TOLERANCE = 1e-9
@@ -104,56 +111,6 @@ class CorrectReport:
     max_error_before: float
     max_error_after: float
     unconverged_frames: int
-
-
-def keep_bends(positions: np.ndarray, captured: np.ndarray, hinges, *, margin: float = 0.02) -> np.ndarray:
-    """Knees and elbows bent the way the capture bends them, never backwards.
-
-    positions, captured : (F, J, 3) exaggerated and captured world positions
-    hinges : (base, middle, end) joint triples (hip, knee, ankle; shoulder, elbow, wrist), or
-        (hip, knee, ankle, toe): the toes tell which way a knee bends when the leg is straight
-
-    Exaggerating a nearly straight leg can carry the knee across the hip-ankle
-    line: a knee bending backwards on a planted leg. The captured knee's side
-    of that line, seen across the exaggerated line, is the side it must stay
-    on: its offset along that side is kept at least about ``margin`` of the
-    limb's length (a C1 soft clamp, unchanged above twice that), with the
-    correction faded out where the capture itself is nearly straight and
-    says little about its side. Only the middle joint moves; the length
-    correction that follows mends the two links.
-    """
-    out = np.array(positions, dtype=np.float64)
-    for hinge in hinges:
-        base, middle, end = hinge[:3]
-        line = out[:, end] - out[:, base]
-        reach = np.linalg.norm(line, axis=-1, keepdims=True)
-        along = line / np.maximum(reach, 1e-300)
-        bent = captured[:, middle] - captured[:, base]
-        cap_line = captured[:, end] - captured[:, base]
-        cap_line = cap_line / np.maximum(np.linalg.norm(cap_line, axis=-1, keepdims=True), 1e-300)
-        side = bent - np.sum(bent * cap_line, axis=-1, keepdims=True) * cap_line
-        length = np.linalg.norm(captured[:, middle] - captured[:, base], axis=-1) + \
-            np.linalg.norm(captured[:, end] - captured[:, middle], axis=-1)
-        if len(hinge) > 3:  # a foot: knees bend toward the toes, which says so even on a straight leg
-            toes = captured[:, hinge[3]] - captured[:, end]
-            toes = toes - np.sum(toes * cap_line, axis=-1, keepdims=True) * cap_line
-            toes = toes / np.maximum(np.linalg.norm(toes, axis=-1, keepdims=True), 1e-300)
-            side = side + 0.1 * length[:, None] * toes
-        side = side - np.sum(side * along, axis=-1, keepdims=True) * along
-        size = np.linalg.norm(side, axis=-1)
-        side = side / np.maximum(size, 1e-300)[:, None]
-        offset = out[:, middle] - out[:, base]
-        offset = offset - np.sum(offset * along, axis=-1, keepdims=True) * along
-        s = np.sum(offset * side, axis=-1)
-        floor = margin * length
-        # A soft clamp: unchanged from 2 floor up, never below 0 (behind the line).
-        low = s < 2.0 * floor
-        lifted = s.copy()
-        knee = 2.0 * floor[low]  # s -> 2f - 2f (1 - exp((s - 2f) / 2f)): slope 1 at 2f, 0 as s -> -inf
-        lifted[low] = knee - knee * (1.0 - np.exp((s[low] - knee) / np.maximum(knee, 1e-300)))
-        trust = smootherstep(size / np.maximum(0.05 * length, 1e-300))
-        out[:, middle] += ((lifted - s) * trust)[:, None] * side
-    return out
 
 
 def accent_stretch(captured: np.ndarray, frame_time: float, height: float, *, max_stretch: float,
@@ -329,3 +286,56 @@ def soft_excess(length: np.ndarray, limit: np.ndarray, width: np.ndarray) -> np.
     width = np.maximum(width, 1e-300)
     inside = np.clip(u, -width, width) + width
     return np.where(u >= width, u, inside * inside / (4.0 * width))
+
+
+# ---------------------------------------------------------------------------- the stage
+
+
+def correct_stage(state: State, config: CorrectConfig) -> State:
+    """The block: over-stretched links brought back toward their length, knees and elbows kept bent.
+
+    Adds ``positions`` and ``correct_report``.
+    """
+    first = state.first
+    skeleton = state.motion.skeleton
+    frame_time = state.motion.frame_time
+    smooth = parse_duration(config.smooth, frame_time, what="correct.smooth")
+    max_stretch = config.max_stretch
+    if config.accent_speed > 0 and max_stretch > 1:
+        max_stretch = accent_stretch(state.captured_pos[first:], frame_time, skeleton.height(),
+                                     max_stretch=max_stretch, accent_speed=config.accent_speed,
+                                     radius=max(int(round(smooth)), 1))
+    hard = None
+    if config.torso < 1:
+        hard = np.zeros(skeleton.num_joints, bool)
+        for name in ("spine", "neck"):
+            if name in state.limbs:
+                hard[list(state.limbs[name].joints[1:])] = True
+        max_stretch = np.broadcast_to(max_stretch, (len(state.positions) - first, skeleton.num_joints)).copy()
+        max_stretch[:, hard] = 1.0 + (max_stretch[:, hard] - 1.0) * config.torso
+    hinges = limb_hinges(skeleton, state.limbs)
+    bent = keep_bends(state.positions[first:], state.captured_pos[first:], hinges) if hinges else state.positions[first:]
+    body, report = correct(
+        bent, skeleton.parents, skeleton.link_lengths(), threshold=config.threshold,
+        delta=config.delta, max_stretch=max_stretch, max_iter=config.max_iter, smooth=smooth, hard=hard,
+    )
+    positions = state.positions.copy()
+    positions[first:] = body
+    notes = state.notes
+    if report.unconverged_frames:
+        notes += (f"correction stopped at max_iter with {report.unconverged_frames} frame(s) above threshold",)
+    return replace(state, positions=positions, correct_report=report, notes=notes)
+
+
+def max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.ndarray) -> float:
+    """Largest ratio of current to rest length over links longer than 1e-3 of the longest.
+
+    Shorter ones are placeholders (Reallusion's pelvis sits 0.7 micrometres from its hip):
+    moved a centimetre they read as a 37,000x stretch.
+    """
+    long_links = lengths > 1e-3 * max(lengths.max(), 1e-12)
+    long_links[0] = False
+    if not long_links.any():
+        return 1.0
+    current = np.linalg.norm(positions[:, long_links] - positions[:, parents[long_links]], axis=-1)
+    return float((current / lengths[long_links]).max())

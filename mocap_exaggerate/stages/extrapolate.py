@@ -38,14 +38,21 @@ anticipation and settle survive.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..analysis.branches import rider_joints
+from ..analysis.limbs import LIMB_NAMES, find_limbs, limb_joints, torso_joints
 from ..core.errors import ConfigError, check_flag, check_number
+from ..core.skeleton import Skeleton
 from ..core.timing import end_ramp, gaussian_average, parse_duration, smootherstep, spread_max, step_gain
 
-__all__ = ["ExtrapolateConfig", "extrapolate"]
+if TYPE_CHECKING:
+    from .state import State
+
+__all__ = ["ExtrapolateConfig", "extrapolate", "extrapolate_stage", "resolve_weights", "welded", "ROOT_NAMES", "WELD"]
 
 #: Widest Gaussian accepted, whatever the clip (a minute; 100,000 frames).
 MAX_SIGMA_SECONDS = 60.0
@@ -235,3 +242,88 @@ def _limit_speed(deviation: np.ndarray, budget: np.ndarray, radius: int) -> np.n
     return out * scale[:, None]
 
 
+# ---------------------------------------------------------------------------- the stage
+
+
+def extrapolate_stage(state: State, config: ExtrapolateConfig) -> State:
+    """The block: every joint's path pushed away from its Gaussian average, after the rest frames.
+
+    Adds ``positions`` and ``speed_limit`` (``max_speed``, which the later stages keep to).
+    """
+    first = state.first
+    skeleton = state.motion.skeleton
+    weights = resolve_weights(skeleton, config.weights, state.limbs)
+    positions = state.positions.copy()
+    frame_time = state.motion.frame_time
+    sigma = config.sigma_frames(frame_time, len(state.positions) - first)
+    notes = state.notes
+    asked = parse_duration(config.smooth, frame_time, what="extrapolate.smooth")
+    if asked > 0.5 * sigma:
+        notes += (f"extrapolate.smooth {config.smooth!r} is more than half of sigma {config.sigma!r}; used "
+                  f"{0.5 * sigma * frame_time:.3g} s (the band between them is what gets exaggerated)",)
+    positions[first:] = extrapolate(
+        state.positions[first:], sigma=sigma, omega=config.omega, weights=weights,
+        smooth=config.smooth_frames(frame_time), ramp=sigma, max_speed=config.max_speed,
+        still=config.still * skeleton.height() * frame_time,
+        torso=(torso_joints(skeleton, state.limbs), config.torso) if config.torso != 1 else None,
+        riders=rider_joints(skeleton),
+    )
+    return replace(state, positions=positions, notes=notes, speed_limit=config.max_speed)
+
+
+def resolve_weights(skeleton: Skeleton, weights: tuple[tuple[str, float], ...], limbs: dict | None = None) -> np.ndarray:
+    """Per-joint weights ``(J,)`` from ``(pattern, weight)`` pairs; later pairs win.
+
+    A pattern is a limb name (its joints and everything below its end), an
+    exact joint name, ``root`` or ``pelvis`` (the root, on any rig, unless a joint
+    has that name), or a shell pattern over joint names.
+
+    Joints welded together (a link shorter than `WELD` of the body's height:
+    Reallusion's CC_Base_Pelvis on CC_Base_Hip, CMU's LHipJoint on Hips) take
+    one weight: the last given to any of them. Two welded joints exaggerated
+    apart would open a link of no length into one of centimetres, a stretch
+    of thousands of times that no correction can undo. For the same reason the
+    joints riding rigidly on another (`rider_joints`: fingers on a hand, toes on
+    a foot) take the weight of the joint they ride on.
+    """
+    out = np.ones(skeleton.num_joints)
+    weld = welded(skeleton)
+    for pattern, weight in weights:
+        if pattern in ROOT_NAMES and pattern not in skeleton.names:
+            joints = np.array([0])
+        elif pattern in LIMB_NAMES or (limbs and pattern in limbs):
+            limbs = find_limbs(skeleton) if limbs is None else limbs
+            if pattern not in limbs:
+                raise ConfigError(f"weight {pattern}={weight:g}: no {pattern} found on this skeleton")
+            joints = limb_joints(skeleton, limbs[pattern])
+        elif pattern in skeleton.names:
+            joints = np.array([skeleton.index(pattern)])
+        else:
+            joints = skeleton.match(pattern)
+            if not len(joints):
+                sample = ", ".join(skeleton.names[:6])
+                raise ConfigError(
+                    f"weight {pattern}={weight:g}: no joint or limb matches {pattern!r} "
+                    f"(joints: {sample}, ...; limbs: {', '.join(LIMB_NAMES)}; root)"
+                )
+        out[np.isin(weld, weld[joints])] = weight
+    for anchor, below in rider_joints(skeleton).items():
+        out[below] = out[anchor]
+    return out
+
+
+#: Names a weight can give the root by on every rig.
+ROOT_NAMES = ("root", "pelvis")
+
+#: Links shorter than this share of the body's height weld their joints together (`welded`).
+WELD = 0.01
+
+
+def welded(skeleton: Skeleton) -> np.ndarray:
+    """``(J,)`` for each joint, the highest joint it is welded to by links shorter than `WELD` x height."""
+    short = skeleton.link_lengths() < WELD * skeleton.height()
+    weld = np.arange(skeleton.num_joints)
+    for j in range(1, skeleton.num_joints):  # parents come first: one pass (joints, not frames)
+        if short[j]:
+            weld[j] = weld[skeleton.parents[j]]
+    return weld

@@ -23,15 +23,24 @@ recovered parent.
 
 from __future__ import annotations
 
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
 import numpy as np
 
+from ..analysis.branches import effective_lengths, first_above_at_distance, first_below_at_distance, riders
 from ..core.kinematics import local_from_world
 from ..core.motion import Motion
 from ..core.rotations import quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow, quat_rotate, quat_slerp
 from ..core.timing import gaussian_average, smootherstep, step_gain
-from .subjoints import SubjointHierarchy, link_starts, riders
+from .state import Output
+from .subjoints import SubjointHierarchy, link_starts
 
-__all__ = ["recover_orientations", "curve_frames", "motion_from_world", "incoming_joint"]
+if TYPE_CHECKING:
+    from ..config import OutputConfig
+    from .state import State
+
+__all__ = ["recover_orientations", "curve_frames", "motion_from_world", "orient_stage"]
 
 
 def motion_from_world(world_pos, world_rot, skeleton, frame_time, euler_hint=None) -> Motion:
@@ -70,46 +79,6 @@ def _fit_turn(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return quat_from_matrix(left @ right)
 
 
-def _effective_lengths(skeleton) -> np.ndarray:
-    """Rest link lengths, with links under 1e-4 of the skeleton height counted as zero.
-
-    Some rigs park a joint a hair from its parent (Reallusion's pelvis sits
-    1e-5 cm from the hip); its direction means nothing.
-    """
-    lengths = skeleton.link_lengths()
-    return np.where(lengths < 1e-4 * skeleton.height(), 0.0, lengths)
-
-
-def _first_at_distance(skeleton, joint: int, rigid: np.ndarray, lengths: np.ndarray) -> list[int]:
-    """For each kept child branch of ``joint``, the first joint down it at non-zero rest distance."""
-    out = []
-    for child in skeleton.children(joint):
-        if rigid[child]:
-            continue
-        current = int(child)
-        while lengths[current] <= 0:
-            below = [int(c) for c in skeleton.children(current) if not rigid[c]]
-            if len(below) != 1:
-                break
-            current = below[0]
-        if lengths[current] > 0 or current != child:
-            out.append(current)
-    return out
-
-
-def _first_above_at_distance(skeleton, joint: int, lengths: np.ndarray) -> int:
-    current = joint
-    while current > 0 and lengths[current] <= 0:
-        current = int(skeleton.parents[current])
-    return int(skeleton.parents[current]) if current > 0 else -1
-
-
-def incoming_joint(skeleton, joint: int) -> int:
-    """The joint whose link into ``joint`` turns it when it ends a chain (zero-length links
-    looked through); -1 when there is none."""
-    return _first_above_at_distance(skeleton, joint, _effective_lengths(skeleton))
-
-
 def recover_orientations(
     sub_pos: np.ndarray,
     hierarchy: SubjointHierarchy,
@@ -141,12 +110,12 @@ def recover_orientations(
     world = np.zeros((frames, skeleton.num_joints, 4))
     world[..., 3] = 1.0
 
-    lengths = _effective_lengths(skeleton)
+    lengths = effective_lengths(skeleton)
     single_joint, single_from, single_to = [], [], []
     for j in range(skeleton.num_joints):
         if rigid[j]:
             continue
-        targets = _first_at_distance(skeleton, j, rigid, lengths)
+        targets = first_below_at_distance(skeleton, j, rigid, lengths)
         if len(targets) >= 2:
             u = source_pos[:, targets] - source_pos[:, j : j + 1]
             v = new_pos[:, targets] - new_pos[:, j : j + 1]
@@ -157,7 +126,7 @@ def recover_orientations(
             single_from.append(j)
             single_to.append(targets[0])
         else:
-            above = _first_above_at_distance(skeleton, j, lengths)
+            above = first_above_at_distance(skeleton, j, lengths)
             if above >= 0:
                 single_joint.append(j)
                 single_from.append(above)
@@ -303,3 +272,27 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
         twist = np.concatenate([direction[on] * np.sin(half)[..., None], np.cos(half)[..., None]], axis=-1)
         out[:, joint] = quat_normalize(quat_mul(out[:, joint], twist))
     return out
+
+
+# ---------------------------------------------------------------------------- the stage
+
+
+def orient_stage(state: State, config: OutputConfig) -> State:
+    """The block: orientations recovered on the rubber skeleton (planted feet pinned, ``speed_limit`` kept),
+    and the output Motion on the skeleton ``config.skeleton`` asks for. Adds ``output``."""
+    motion = state.motion
+    hierarchy, positions = state.rubber()
+    sub_rot, sub_pos = recover_orientations(positions, hierarchy, motion, state.captured_rot, state.captured_pos,
+                                            state.pins, max_speed=state.speed_limit)
+    rubber = link_starts(hierarchy)  # the skeleton sub_rot and sub_pos are on
+    if config.skeleton == "original":
+        keep = rubber.original
+        out_pos, out_rot = sub_pos[:, keep], sub_rot[:, keep]
+        out = motion_from_world(out_pos, out_rot, motion.skeleton.with_full_channels(), motion.frame_time,
+                                motion.euler_hint)
+        original_index = np.arange(motion.skeleton.num_joints)
+    else:
+        out_pos, out_rot = sub_pos, sub_rot
+        out = motion_from_world(out_pos, out_rot, rubber.skeleton, motion.frame_time)
+        original_index = rubber.original
+    return replace(state, output=Output(out, out_pos, out_rot, original_index))

@@ -19,15 +19,22 @@ that ``h * omega_max <= 1``. The loop is compiled with Numba.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import NamedTuple
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
+from ..analysis.limbs import limb_hinges, limb_joints
 from ..core.errors import ConfigError, check_flag, check_number
+from ..core.timing import smootherstep
+from .bends import keep_bends_on_rubber
+from .subjoints import even_out
+
+if TYPE_CHECKING:
+    from .state import State
 
 __all__ = ["SpringConfig", "SpringLinks", "simulate_springs", "spring_links", "spring_substeps", "stable_link_stiffness",
-           "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE"]
+           "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE", "springs_stage", "hanging_links"]
 
 STIFFNESS_RANGE = (0.0, 1e5)
 DAMPING_RANGE = (0.0, 1e4)
@@ -293,3 +300,63 @@ def simulate_springs(
     share = blend[members][:, None] if blend.ndim else blend
     out[:, members] = (1.0 - share) * follow + share * suspended
     return out
+
+
+# ---------------------------------------------------------------------------- the stage
+
+
+def springs_stage(state: State, config: SpringConfig) -> State:
+    """The block: follow-through on the arms and legs, knees and elbows bent back, sub-links evened out.
+
+    Adds ``sub_positions`` and ``substeps``.
+    """
+    hierarchy, positions = state.rubber()
+    parents = hierarchy.skeleton.parents
+    frame_time = state.motion.frame_time
+    active, blend = hanging_links(state.motion.skeleton, hierarchy, state.limbs, config.blend)
+    links = spring_links(parents, active)
+    out = positions.copy()
+    out[state.first:] = simulate_springs(
+        positions[state.first:], parents, frame_time, stiffness=config.stiffness,
+        link_stiffness=config.link_stiffness, damping=config.damping, blend=blend, links=links,
+    )
+    # The knees' and elbows' lag may carry them behind the line again: bend them back.
+    hinges = limb_hinges(state.motion.skeleton, state.limbs)
+    out[state.first:] = keep_bends_on_rubber(out[state.first:], hierarchy, state.captured_pos[state.first:], hinges)
+    # The lag bunches sub-joints along a limb as well as bending it: make its sub-links even again.
+    swinging = np.unique(hierarchy.link_child[np.flatnonzero(np.asarray(blend) * active > 0)])
+    out[state.first:] = even_out(out[state.first:], hierarchy, swinging)
+    substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
+    carried = stable_link_stiffness(frame_time, config.link_stiffness, links.degree, substeps)
+    notes = state.notes
+    if carried < config.link_stiffness:
+        notes += (f"springs: link stiffness {config.link_stiffness:g} is more than {substeps} substeps per frame "
+                  f"can carry at {1 / frame_time:g} fps; used {carried:.4g}",)
+    return replace(state, sub_positions=out, substeps=substeps, notes=notes)
+
+
+def hanging_links(skeleton, hierarchy, limbs: dict, blend: float) -> tuple[np.ndarray, np.ndarray | float]:
+    """Which rubber joints swing ``(J',)`` bool, and how much of the follow-through each takes.
+
+    Follow-through hangs off a solid body: the root, spine, neck, head, collars and the limbs'
+    roots follow their (exaggerated) positions exactly; the arms and legs below the shoulder and
+    hip swing. A lagging torso stretched more than the limbs (1.4x on a boxer's neck), which
+    cartoon torsos do not (the Stretch-Engine thesis's Table 1), and a lagging collar spun the
+    chest round. The follow-through grows along a limb's first link, from none at the shoulder
+    or hip to all of it at the elbow or knee: a sub-joint next to a fixed root swinging fully
+    kinked the limb there. Without arms or legs found, every non-rigid link swings by ``blend``.
+    """
+    active = ~hierarchy.rigid[hierarchy.link_child]
+    hung = [limb for name, limb in limbs.items() if name.endswith(("_arm", "_leg"))]
+    if not hung:
+        return active, blend
+    hanging = np.zeros(skeleton.num_joints, bool)
+    for limb in hung:
+        hanging[limb_joints(skeleton, limb)] = True
+    hanging[[limb.base for limb in hung]] = False
+    active &= hanging[hierarchy.link_child]
+    weights = np.full(len(hierarchy.link_child), float(blend))
+    for limb in hung:
+        first = hierarchy.link_child == limb.joints[1]
+        weights[first] *= smootherstep(hierarchy.fraction[first])
+    return active, weights

@@ -19,8 +19,10 @@ length on the next frame, leaving its peak at the speed it arrived with.
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -28,10 +30,18 @@ from ..analysis.limbs import limb_length
 from ..core.errors import ConfigError, check_number
 from ..core.rotations import quat_between, quat_rotate
 from ..core.timing import parse_duration, parse_frame
+from .state import StretchKey
+
+if TYPE_CHECKING:
+    from .state import State
 
 __all__ = [
     "StretchSpec",
+    "StretchEvent",
     "StretchResult",
+    "StretchPlan",
+    "stretch_stage",
+    "specs_for_paths",
     "parse_stretch",
     "ease_curve",
     "release_curve",
@@ -280,6 +290,35 @@ def exaggerated_path(path: np.ndarray, base_at_final: np.ndarray, spec: StretchS
     return (new[::-1] if spec.pivot == "end" else new), effective, exact
 
 
+@dataclass(frozen=True)
+class StretchEvent:
+    """One stretch as applied.
+
+    limb : the limb stretched; frames : its inclusive (first, last) frame range
+    scale, axes, pivot : as declared (or as found, for a strike)
+    effective_scale : the scale S' the path was blended toward (the thesis's section 4.3)
+    axes_relaxed : the path could not squash on the axes asked and was squashed along the limb
+    reach : for a strike found, the reach it ends at in limb lengths (its style); None for declared ones
+    """
+
+    limb: str
+    frames: tuple[int, int]
+    scale: float
+    axes: str
+    pivot: str
+    effective_scale: float
+    axes_relaxed: bool
+    reach: float | None = None
+
+    def to_dict(self) -> dict:
+        """The event as the manifest lists it."""
+        out = {"limb": self.limb, "frames": list(self.frames), "scale": self.scale, "axes": self.axes,
+               "pivot": self.pivot, "effective_scale": self.effective_scale, "axes_relaxed": self.axes_relaxed}
+        if self.reach is not None:
+            out["reach"] = self.reach
+        return out
+
+
 @dataclass
 class StretchResult:
     """What the stretch pass did.
@@ -287,13 +326,13 @@ class StretchResult:
     positions : (F, J, 3) float64 world positions after all stretches
     stretch_factors : (F, J) float64, each link's length over its length before
         the pass (1 where untouched): the glTF writer turns it into thickness
-    events : one dict per stretch (limb, frames, scale, effective scale, exact)
+    events : one `StretchEvent` per stretch
     trails : per event, frames and the original and new end-effector paths
     """
 
     positions: np.ndarray
     stretch_factors: np.ndarray
-    events: list[dict] = field(default_factory=list)
+    events: list[StretchEvent] = field(default_factory=list)
     trails: list[dict] = field(default_factory=list)
 
 
@@ -380,10 +419,8 @@ def apply_stretches(
             target[lo:first] += release_curve(shift[::-1], first - lo)[::-1]
         span = slice(lo, hi + 1)
         _follow(world_pos, skeleton, limb, target, span)
-        events.append({
-            "limb": spec.limb, "frames": [first, last], "scale": float(spec.scale), "axes": spec.axes,
-            "pivot": spec.pivot, "effective_scale": round(float(effective), 6), "axes_relaxed": not exact,
-        })
+        events.append(StretchEvent(limb=spec.limb, frames=(first, last), scale=float(spec.scale), axes=spec.axes,
+                                   pivot=spec.pivot, effective_scale=round(float(effective), 6), axes_relaxed=not exact))
         trails.append({
             "limb": spec.limb, "joint": skeleton.names[end], "frames": list(range(lo, hi + 1)),
             "original": before[span, end].round(6).tolist(), "exaggerated": world_pos[span, end].round(6).tolist(),
@@ -570,3 +607,72 @@ def strike_scale(spec: StretchSpec, world_pos: np.ndarray, skeleton, limbs: dict
     if reach <= 0 or full <= 0:
         return spec
     return replace(spec, scale=float(min(MAX_SCALE, max(1.0, spec.scale * full / reach))))
+
+
+# ---------------------------------------------------------------------------- the stage
+
+
+class StretchPlan(NamedTuple):
+    """The stretch stage's settings: the declared events and the automatic finder's."""
+
+    specs: tuple[StretchSpec, ...]
+    auto: AutoStretchConfig
+
+
+def stretch_stage(state: State, plan: StretchPlan) -> State:
+    """The block: the declared stretches, the strikes found and the hand-edited paths, applied.
+
+    Adds ``positions``, ``stretch`` (events, trails, stretch factors) and ``stretch_keys``
+    (the length each event promised at its final frame). Nothing to do without any of the three.
+    """
+    motion, first = state.motion, state.first
+    specs = list(plan.specs) + list(specs_for_paths(state.paths or {}, plan.specs))
+    if not specs and not plan.auto.enabled:
+        return state
+    notes = list(state.notes)
+    reaches: dict[tuple[str, int, int], float] = {}
+    if plan.auto.enabled:
+        # Strikes are found in the captured motion, not in its exaggeration.
+        found = find_strikes(state.captured_pos[first:], motion.skeleton, state.limbs, motion.frame_time, plan.auto)
+        styled = [spec.shifted(first) for spec in found]
+        found = [strike_scale(spec, state.positions, motion.skeleton, state.limbs, motion.frame_time)
+                 for spec in styled]
+        notes += [f"auto-stretch: {s.limb} frames {s.start}-{s.end} to {style.scale:g} limb lengths (x{s.scale:.3g})"
+                  for s, style in zip(found, styled)]
+        reaches = {(s.limb, int(s.start), int(s.end)): style.scale for s, style in zip(found, styled)}
+        span = functools.partial(StretchSpec.span, frame_time=motion.frame_time, num_frames=motion.num_frames)
+        for spec in found:  # the user's own events win over found ones
+            if not overlapping(span(spec), [span(other) for other in specs if other.limb == spec.limb]):
+                specs.append(spec)
+    result = apply_stretches(state.positions, motion.skeleton, state.limbs, tuple(specs), motion.frame_time,
+                             paths=state.paths)
+    positions = result.positions
+    positions[:first] = state.positions[:first]
+    events, keys = [], []
+    for event in result.events:
+        reach = reaches.get((event.limb, *event.frames))
+        if reach is not None:  # a found strike: its style is the reach it ends at, in limb lengths
+            event = replace(event, reach=reach)
+        events.append(event)
+        if event.axes_relaxed:
+            notes.append(
+                f"stretch {event.limb} frames {event.frames[0]}-{event.frames[1]}: the path cannot "
+                f"squash to x{event.scale:g} on axes {event.axes}; squashed along the limb instead"
+            )
+        limb = state.limbs[event.limb]
+        frame = event.frames[1] if event.pivot == "start" else event.frames[0]
+        if frame >= first:
+            vectors = positions[first:, limb.end] - positions[first:, limb.base]
+            keys.append(StretchKey(event.limb, limb.base, limb.end, frame - first, vectors))
+    return replace(state, positions=positions, stretch=replace(result, events=events), stretch_keys=tuple(keys),
+                   notes=tuple(notes))
+
+
+def specs_for_paths(paths: dict, specs: tuple[StretchSpec, ...]) -> tuple[StretchSpec, ...]:
+    """Events (scale 1, no release) for edited paths on limbs no declared stretch covers."""
+    extra = []
+    for limb, (edit_frames, _) in paths.items():
+        if not any(s.limb == limb for s in specs) and len(edit_frames) >= 2:
+            extra.append(StretchSpec(limb=limb, start=int(min(edit_frames)), end=int(max(edit_frames)), scale=1.0,
+                                     release=0))
+    return tuple(extra)

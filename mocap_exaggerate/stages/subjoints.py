@@ -17,38 +17,31 @@ rest link length, and each sub-joint sits on it at its own parameter.
 from __future__ import annotations
 
 import functools
-import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..analysis.limbs import find_limbs
+from ..analysis.branches import minor_branches, rubber_groups
 from ..core.errors import ConfigError, check_flag
 from ..core.skeleton import POSITION_CHANNELS, Skeleton
 
+if TYPE_CHECKING:
+    from .state import State
+
 __all__ = [
+    "subjoints_stage",
     "SubjointConfig",
     "SubjointHierarchy",
     "build_hierarchy",
     "link_starts",
-    "minor_branches",
-    "rubber_groups",
     "position_subjoints",
     "bezier_points",
     "even_out",
 ]
 
-#: Names of branches that never carry a rubber limb: digits, face, helpers.
-_MINOR_NAME = re.compile(
-    r"finger|thumb|index|middle|ring|pinky|toe|eye|jaw|tongue|teeth|facial|twist|share|^__|nub$|_end$",
-    re.IGNORECASE,
-)
 #: Most sub-links a link is cut into, by count or by length.
 MAX_CUTS = 32
-#: A side branch whose reach is under this share of its longest sibling's is minor.
-MINOR_REACH = 0.35
-
-
 @dataclass(frozen=True, kw_only=True)
 class SubjointConfig:
     """Settings of the sub-joint block.
@@ -123,106 +116,6 @@ class SubjointHierarchy:
     @property
     def is_original(self) -> np.ndarray:
         return self.fraction == 1.0
-
-
-def minor_branches(skeleton: Skeleton, extra_rigid: tuple[str, ...] = ()) -> np.ndarray:
-    """(J,) bool: joints on minor branches, which ride rigidly on their parent.
-
-    Pruned: everything below a found arm or leg end (hands' fingers, feet's
-    toes); subtrees named like fingers, toes, eyes, jaws, twist or share bones
-    or helpers, unless they lead to a limb; side branches much shorter than
-    their longest sibling (the same limb-guard applies); ``extra_rigid``
-    patterns.
-    """
-    count = skeleton.num_joints
-    limbs = find_limbs(skeleton)
-    protected = np.zeros(count, bool)
-    for limb in limbs.values():
-        for j in limb.joints:
-            protected[_ancestors(skeleton, j)] = True
-    rigid = np.zeros(count, bool)
-    for name, limb in limbs.items():
-        if name.endswith(("_arm", "_leg")):
-            below = skeleton.descendants(limb.end)[1:]
-            rigid[below] = True
-    # Each branch's reach from its parent, and the longest among each joint's children: once,
-    # not per joint (a root with thousands of children made this quadratic).
-    through = _reach(skeleton) + skeleton.link_lengths()
-    parents = skeleton.parents
-    longest = np.zeros(count)
-    np.maximum.at(longest, parents[1:], through[1:])
-    siblings = np.bincount(parents[1:], minlength=count)
-    minor = np.zeros(count, bool)
-    for j in range(1, count):
-        if protected[j]:
-            continue
-        if _MINOR_NAME.search(skeleton.names[j]):
-            minor[j] = True
-        elif siblings[parents[j]] > 1 and through[j] < MINOR_REACH * longest[parents[j]]:
-            minor[j] = True
-    # A minor joint takes its whole subtree with it (parents come before children).
-    for j in range(1, count):
-        rigid[j] |= minor[j] or rigid[parents[j]] and not protected[j]
-    for pattern in extra_rigid:
-        matched = skeleton.match(pattern)
-        if not len(matched):
-            raise ConfigError(f"subjoints.rigid: no joint matches {pattern!r}")
-        for j in matched:
-            rigid[skeleton.descendants(int(j))] = True
-    rigid[0] = False
-    return rigid
-
-
-def _ancestors(skeleton: Skeleton, joint: int) -> list[int]:
-    out = []
-    while joint >= 0:
-        out.append(joint)
-        joint = int(skeleton.parents[joint])
-    return out
-
-
-def _reach(skeleton: Skeleton) -> np.ndarray:
-    """Longest rest path from each joint down to a leaf or End Site, ``(J,)``."""
-    lengths = skeleton.link_lengths()
-    ends = np.where(np.isfinite(skeleton.end_sites[:, 0]), np.linalg.norm(np.nan_to_num(skeleton.end_sites), axis=1), 0.0)
-    reach = ends.copy()
-    for j in range(skeleton.num_joints - 1, 0, -1):
-        p = skeleton.parents[j]
-        reach[p] = max(reach[p], reach[j] + lengths[j])
-    return reach
-
-
-def riders(skeleton: Skeleton, rigid: np.ndarray) -> dict[int, list[int]]:
-    """Joint -> the rigid joints riding on it: those whose nearest non-rigid ancestor it is
-    (toes on a foot, fingers on a hand; a hip has none, though toes hang far below it)."""
-    out: dict[int, list[int]] = {}
-    for j in np.flatnonzero(rigid):
-        p = int(skeleton.parents[j])
-        while p > 0 and rigid[p]:
-            p = int(skeleton.parents[p])
-        out.setdefault(p, []).append(int(j))
-    return out
-
-
-def rubber_groups(skeleton: Skeleton, rigid: np.ndarray) -> tuple[tuple[int, ...], ...]:
-    """Chains of original joints that bend as one rubber hose.
-
-    Each chain runs from the joint it hangs from (a branch joint, or the root)
-    down to an end effector of the pruned tree.
-    """
-    kept_children = [[int(c) for c in skeleton.children(j) if not rigid[c]] for j in range(skeleton.num_joints)]
-    groups = []
-    for end in range(1, skeleton.num_joints):
-        if rigid[end] or kept_children[end]:
-            continue
-        chain = [end]
-        joint = end
-        while skeleton.parents[joint] > 0 and len(kept_children[skeleton.parents[joint]]) == 1:
-            joint = int(skeleton.parents[joint])
-            chain.append(joint)
-        chain.append(int(skeleton.parents[joint]))  # the branch joint the group hangs from
-        groups.append(tuple(chain[::-1]))
-    return tuple(groups)
 
 
 def build_hierarchy(skeleton: Skeleton, config: SubjointConfig | None = None) -> SubjointHierarchy:
@@ -479,3 +372,15 @@ def even_out(positions: np.ndarray, hierarchy: SubjointHierarchy, links: np.ndar
         miss = (points[:, :, -1] - points[:, :, 0] - even.sum(axis=2))[:, :, None]
         out[:, chain[:, 1:-1]] = points[:, :, :1] + built + fraction[None, :, 1:-1, None] * miss
     return out
+
+
+# ---------------------------------------------------------------------------- the stage
+
+
+def subjoints_stage(state: State, config: SubjointConfig) -> State:
+    """The block: every link cut into sub-links, the sub-joints placed on Bézier curves. Adds ``hierarchy``
+    and ``sub_positions``."""
+    skeleton = state.motion.skeleton
+    hierarchy = build_hierarchy(skeleton, config)
+    return replace(state, hierarchy=hierarchy,
+                   sub_positions=position_subjoints(state.positions, hierarchy, skeleton.link_lengths()))
