@@ -297,3 +297,32 @@ def test_a_smoothing_wider_than_the_band_is_said_and_the_link_figure_skips_place
     lengths = np.array([0.0, 7e-5, 40.0])
     positions = np.array([[[0.0, 0, 0], [0.0, 1.0, 0], [0.0, 41.0, 0]]])
     assert max_link_stretch(positions, parents, lengths) == pytest.approx(1.0)
+
+
+def test_stages_talk_through_typed_fields_and_one_with_nothing_to_do_is_not_listed(sample_clip):
+    from mocap_exaggerate.pipeline import STAGES
+    from mocap_exaggerate.stages.contacts import ConstraintPlan, constraints_stage
+    from mocap_exaggerate.stages.state import StretchKey
+    from mocap_exaggerate.stages.stretch import StretchEvent, StretchSpec
+
+    motion = read_bvh(sample_clip)[0]
+    config = load_preset("cartoon")
+    quiet = replace(config, contacts=replace(config.contacts, enabled=False))
+    assert "constraints" not in run(motion, quiet).stages  # no contacts, targets or stretches: nothing to do
+    state = prepare(motion, quiet.input, limbs=find_limbs(motion.skeleton))
+    assert constraints_stage(state, ConstraintPlan(quiet.contacts, ())) is state
+    stretch = StretchSpec(limb="left_arm", start=20, end=40, scale=2.0)
+    result = run(motion, replace(quiet, stretch=(stretch,)))
+    assert result.stages[-3:] == ["springs", "constraints", "orient"]  # switched on by the stretch's key, not its settings
+    (event,) = result.stretch.events
+    assert isinstance(event, StretchEvent) and event.frames == (20, 40) and event.to_dict()["frames"] == [20, 40]
+    (held,) = result.constraints["stretch_keys"]
+    assert held["limb"] == "left_arm" and held["ratio"] == pytest.approx(1.0, abs=0.02)
+    # The stretch stage adds its promises as typed keys the constraints stage reads.
+    stretched = next(stage for stage in STAGES if stage.name == "stretch")
+    after = stretched.apply(state, stretched.settings(replace(quiet, stretch=(stretch,))))
+    (key,) = after.stretch_keys
+    assert isinstance(key, StretchKey) and key.frame == 40 - after.first and key.vectors.shape == (motion.num_frames - after.first, 3)
+    # The extrapolation's speed limit reaches the later stages through the state, not their settings.
+    extrapolated = STAGES[0].apply(state, config.extrapolate)
+    assert extrapolated.speed_limit == config.extrapolate.max_speed and state.speed_limit == 0.0
