@@ -322,7 +322,8 @@ def test_stages_talk_through_typed_fields_and_one_with_nothing_to_do_is_not_list
     stretched = next(stage for stage in STAGES if stage.name == "stretch")
     after = stretched.apply(state, stretched.settings(replace(quiet, stretch=(stretch,))))
     (key,) = after.stretch_keys
-    assert isinstance(key, StretchKey) and key.frame == 40 - after.first and key.vectors.shape == (motion.num_frames - after.first, 3)
+    assert isinstance(key, StretchKey) and key.frame == 40 - after.first
+    assert key.vectors.shape == (motion.num_frames - after.first, 3)
     # The extrapolation's speed limit reaches the later stages through the state, not their settings.
     extrapolated = STAGES[0].apply(state, config.extrapolate)
     assert extrapolated.speed_limit == config.extrapolate.max_speed and state.speed_limit == 0.0
