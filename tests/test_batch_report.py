@@ -319,9 +319,9 @@ def test_a_scheduler_without_workers_is_said_not_waited_on_forever(monkeypatch):
     from distributed import LocalCluster
 
     from mocap_exaggerate.core.errors import ConfigError
-    from mocap_exaggerate.jobs import batch
+    from mocap_exaggerate.jobs import on_dask
 
-    monkeypatch.setattr(batch, "WAIT_FOR_WORKERS", 1.0)
+    monkeypatch.setattr(on_dask, "WAIT_FOR_WORKERS", 1.0)
     with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
         with pytest.raises(ConfigError, match="has no workers"):
-            batch.connect_dask(cluster.scheduler_address)
+            on_dask.connect_dask(cluster.scheduler_address)

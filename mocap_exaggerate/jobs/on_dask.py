@@ -1,0 +1,139 @@
+"""Running a batch's clips on Dask distributed: a `LocalCluster` (``--scheduler local``) or a
+running scheduler (``--scheduler tcp://host:8786``), one task per clip.
+
+Dask is optional (the ``dask`` extra): `check_scheduler` refuses an address, or
+a missing Dask, before any work; `connect_dask` refuses a scheduler that cannot
+be reached or has no workers; `run_on_dask` hands each clip's `FileResult` on
+as its task comes back. A task that fails (its worker died too often) fails
+its clip; a scheduler that goes away stops the batch (`SchedulerLost`).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from ..core.errors import ConfigError
+from .batch_types import BatchOptions, Clip, FileResult
+from .discovery import largest_first, source_size
+from .pool import one_thread_per_worker
+from .task import clear_temporaries, convert_file
+
+__all__ = ["check_scheduler", "connect_dask", "run_on_dask", "SchedulerLost", "WAIT_FOR_WORKERS"]
+
+#: Seconds a batch waits for a Dask scheduler without workers to get one.
+WAIT_FOR_WORKERS = 30.0
+
+
+class SchedulerLost(Exception):
+    """The Dask scheduler went away mid-batch: the clips whose tasks had not come back are not done."""
+
+
+def check_scheduler(scheduler: str) -> None:
+    """Refuse (ConfigError) a ``scheduler`` that is neither ``local`` nor a Dask address, or Dask missing."""
+    if scheduler != "local" and not re.fullmatch(r"(tcp|tls|ws|wss|inproc|ucx)://\S+", scheduler):
+        shown = repr(scheduler) if len(scheduler) <= 80 else f"{scheduler[:80]!r}... ({len(scheduler)} characters)"
+        raise ConfigError(f"--scheduler {shown}: give 'local' or a Dask scheduler's address such as tcp://host:8786")
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise ConfigError("--scheduler needs Dask distributed: pip install 'mocap-exaggerate[dask]'") from None
+
+
+def connect_dask(scheduler: str, jobs: int = 1):
+    """A Dask ``(client, cluster)``: ``local`` starts a `LocalCluster` of ``jobs`` one-thread worker
+    processes (``cluster`` is then to be closed after the client), an address (``tcp://host:8786``)
+    connects to a running scheduler (``cluster`` None). ConfigError when Dask is missing or the
+    scheduler cannot be reached."""
+    import logging
+
+    check_scheduler(scheduler)
+    from distributed import Client, LocalCluster
+
+    if scheduler == "local":
+        try:
+            with one_thread_per_worker():
+                cluster = LocalCluster(n_workers=max(jobs, 1), threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.ERROR)
+        except KeyboardInterrupt:
+            raise
+        except Exception as error:  # Dask's own failures to start (a port, a worker that did not come up)
+            raise ConfigError(f"--scheduler local: the local Dask cluster did not start: "
+                              f"{type(error).__name__}: {error}") from None
+        try:
+            return Client(cluster), cluster
+        except BaseException:
+            cluster.close()
+            raise
+    try:
+        client = Client(scheduler, timeout=10)
+    except (OSError, TimeoutError) as error:
+        raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: {error}") from None
+    try:
+        client.wait_for_workers(1, timeout=WAIT_FOR_WORKERS)
+    except TimeoutError:
+        client.close()
+        raise ConfigError(f"--scheduler {scheduler}: the scheduler has no workers (waited {WAIT_FOR_WORKERS:g} s); "
+                          f"start some: dask worker {scheduler} --nthreads 1") from None
+    except BaseException:
+        client.close()
+        raise
+    return client, None
+
+
+def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptions, parameters: str, *,
+                scheduler: str, jobs: int = 1, finished: Callable[[Clip, FileResult], None]) -> None:
+    """Convert ``clips`` on Dask distributed: one task per clip, the largest first, each result
+    to ``finished`` as it comes back.
+
+    The workers read the clips and write the outputs themselves, by absolute path:
+    on a cluster the input and output folders must be at the same paths on every
+    worker (a shared mount). Results and manifests name the files as given here,
+    so the outputs are the bytes a serial run writes. Ctrl-C (KeyboardInterrupt)
+    cancels the tasks not back yet and is raised again; `SchedulerLost` when the
+    scheduler goes away.
+    """
+    client, cluster = connect_dask(scheduler, jobs)
+    out_abs = Path(os.path.abspath(out_dir))  # absolute, links not followed: messages name what was given
+    futures = {}
+    try:
+        from distributed import as_completed
+
+        for index, clip in enumerate(largest_first(clips)):
+            task = Clip(Path(os.path.abspath(clip.source)), clip.relative)
+            future = client.submit(convert_file, task, out_abs, options, parameters, str(clip.source),
+                                   pure=False, priority=source_size(clip),
+                                   key=f"mocap-exaggerate-{index}-{os.getpid()}-{time.monotonic_ns()}")
+            futures[future] = clip
+        try:
+            for future in as_completed(list(futures)):
+                clip = futures.pop(future)
+                try:
+                    result = future.result()
+                except Exception as error:
+                    if future.cancelled() or client.status != "running":  # not this clip's doing: the scheduler went
+                        raise SchedulerLost(f"lost the Dask scheduler at {scheduler}") from None
+                    # The task failed: its worker died (out of memory, killed) too often, say.
+                    result = FileResult(str(clip.source), "failed",
+                                        error=f"its Dask task failed: {type(error).__name__}: {error}")
+                    clear_temporaries(clip, out_abs, options)
+                result.outputs = {kind: _given(path, out_abs, out_dir) for kind, path in result.outputs.items()}
+                finished(clip, result)
+        except KeyboardInterrupt:
+            client.cancel(list(futures))
+            raise
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _given(path: str, out_abs: Path, out_dir) -> str:
+    """An output path a worker wrote by its absolute name, named under the output folder as given."""
+    try:
+        return str(Path(out_dir) / Path(path).relative_to(out_abs))
+    except ValueError:
+        return path

@@ -1,0 +1,84 @@
+"""``batch --resume``: which clips' outputs can be kept, and what a kept clip reports.
+
+A clip's outputs are kept when its manifest reads, was made with the same
+parameters (`batch_parameters`) from the same input bytes, and every file it
+lists is there with the digest it lists (and, for a batch with a report, its
+pictures were drawn from those outputs). Anything else is redone, saying why.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+from .batch_types import BatchOptions, Clip, FileResult
+from .discovery import read_manifest
+
+__all__ = ["batch_parameters", "is_complete", "redo_reason", "kept_result"]
+
+
+def batch_parameters(options: BatchOptions) -> str:
+    """The digest of what shapes a batch's outputs (`parameters_digest`), recorded in each manifest."""
+    from .job import parameters_digest
+
+    return parameters_digest(options.config, preset=options.preset, glb=options.glb, units=options.units,
+                             influences=options.influences, skin=options.skin, joint_map=options.joint_map)
+
+
+def is_complete(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions, parameters: str | None = None) -> bool:
+    """Whether ``clip``'s output set under ``out_dir`` is complete and was made from these input
+    bytes with these parameters (`batch_parameters`; computed when not given)."""
+    return redo_reason(clip, out_dir, options, parameters) is None
+
+
+def redo_reason(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
+                parameters: str | None = None) -> str | None:
+    """Why ``clip`` must be (re)done under ``out_dir``; None when its outputs can be kept.
+
+    The cheap reasons first (no manifest, other options, another input), the
+    hashing of every output last.
+    """
+    from .job import check_output_set
+    from .outputs import file_digest
+
+    manifest = Path(out_dir) / clip.relative.parent / f"{clip.name}.json"
+    info = read_manifest(manifest)
+    if info is None:
+        return "no outputs yet" if not manifest.exists() else "outputs incomplete (the manifest does not read)"
+    if parameters is None:
+        parameters = batch_parameters(options)
+    if info.get("parameters") != parameters:
+        return "made with other options"
+    try:
+        if file_digest(clip.source.read_bytes()) != (info.get("input") or {}).get("hash"):
+            return "the input changed"
+    except OSError:
+        return "the input cannot be read"
+    problems = check_output_set(manifest)
+    if problems:
+        return f"outputs incomplete ({problems[0]})"
+    if options.report:
+        from ..viz.report import pictures_current
+
+        if not pictures_current(out_dir, manifest):
+            return "its report pictures are missing or were drawn from other outputs"
+    return None
+
+
+def kept_result(label: str, clip: Clip, out_dir: str | os.PathLike, started: float) -> FileResult:
+    """The result of a clip whose complete outputs are kept: what its manifest says.
+
+    started : `time.perf_counter` when the clip was taken up
+    """
+    from .job import output_paths
+
+    folder = Path(out_dir) / clip.relative.parent
+    info = read_manifest(folder / f"{clip.name}.json") or {}
+    listed = info.get("outputs") or {}
+    outputs = {kind: str(path) for kind, path in output_paths(folder, clip.name).items()
+               if kind in listed or kind == "manifest"}
+    stretch = (info.get("result") or {}).get("max_link_stretch")
+    return FileResult(label, "skipped", outputs=outputs, frames=(info.get("result") or {}).get("frames"),
+                      seconds=time.perf_counter() - started, max_link_stretch=stretch,
+                      error="outputs complete, from the same input and parameters")
