@@ -9,7 +9,8 @@ import numpy as np
 from mocap_exaggerate import load_preset
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.viz.preview import fastest_end, render_preview, render_trajectory, telling_frames, telling_window
+from mocap_exaggerate.viz.framing import fastest_end, telling_frames, telling_window
+from mocap_exaggerate.viz.stills import render_preview, render_trajectory
 
 from .helpers import SAMPLE_DIR
 

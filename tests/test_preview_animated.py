@@ -18,15 +18,10 @@ from mocap_exaggerate import load_preset
 from mocap_exaggerate.core.errors import ConfigError
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.viz.preview import (
-    animation_frames,
-    gif_durations,
-    pose_bodies,
-    preview_window,
-    render_gif,
-    view_limits,
-    write_preview,
-)
+from mocap_exaggerate.viz.animation import animation_frames, gif_durations, render_gif
+from mocap_exaggerate.viz.framing import preview_window, view_limits
+from mocap_exaggerate.viz.posing import pose_bodies
+from mocap_exaggerate.viz.preview import write_preview
 from mocap_exaggerate_cli.main import cli
 
 from .helpers import SAMPLE_DIR, shared

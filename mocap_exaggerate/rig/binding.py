@@ -49,7 +49,8 @@ from ..core.rotations import quat_between, quat_to_matrix
 from ..core.skeleton import Skeleton
 from .skinning import Skin, top_influences
 
-__all__ = ["Binding", "joint_roles", "pair_joints", "bind_skin", "skin_skeleton", "read_joint_map", "needs_binding"]
+__all__ = ["Binding", "joint_roles", "pair_joints", "bind_skin", "bind_skin_to_clip", "skin_skeleton", "read_joint_map",
+           "needs_binding"]
 
 # Roles whose joints sit in the trunk: where an A-pose and a T-pose agree, so the overall placement is fitted to them.
 _TRUNK = re.compile(r"^(hips|pelvis|spine\d+|neck\d+|head|(left|right)_(clavicle|upper_arm|thigh))$")
@@ -537,3 +538,13 @@ def _bone_maps(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed:
             linear[j] = turns[j]
     # y -> rest[j] + linear[j] @ (y - source[j]) as a 3x4 matrix
     return np.concatenate([linear, (rest - np.einsum("jab,jb->ja", linear, source))[:, :, None]], axis=2)
+
+
+def bind_skin_to_clip(skin: Skin, clip: Skeleton, joint_map: dict[str, str] | None = None, *,
+                      skin_label: str = "skin", clip_label: str = "the clip") -> tuple[Skin, Binding | None]:
+    """`bind_skin`, its refusal naming the skin and the clip for the user:
+    ``ConfigError("<skin_label>: <why> (clip <clip_label>)")``."""
+    try:
+        return bind_skin(skin, clip, joint_map)
+    except ConfigError as error:
+        raise ConfigError(f"{skin_label}: {error} (clip {clip_label})") from None

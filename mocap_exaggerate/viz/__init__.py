@@ -1,1 +1,2 @@
-"""Pictures: still and animated previews (`preview`) and the batch's HTML report (`report`)."""
+"""Pictures: a clip's previews (`preview`: the bodies in `posing`, what is shown in `framing`, drawn
+by `stills` and `animation`) and the batch's HTML report (`report`)."""

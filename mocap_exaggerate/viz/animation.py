@@ -1,0 +1,227 @@
+"""Animated previews: the captured and exaggerated body side by side at the clip's speed, as
+RGB pictures (`render_frames`), a looping GIF (`render_gif`) or an H.264 MP4 through ffmpeg
+(`render_mp4`).
+
+`animation_frames` chooses the frames shown (every step-th, at most `MAX_FPS`);
+one camera and one scale for the whole animation (`camera_centres`, `view_limits`).
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import math
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import ConfigError, check_number
+from ..core.motion import Motion
+from ..pipeline import PipelineResult
+from ..rig.skinning import Skin
+from .framing import camera_centres, preview_window, view_limits
+from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, pose_bodies, shaded_triangles
+
+__all__ = ["animation_frames", "render_frames", "render_gif", "render_mp4", "gif_durations", "MAX_FPS",
+           "MAX_SECONDS", "NO_FFMPEG"]
+
+log = logging.getLogger(__name__)
+
+MAX_FPS = 20.0  # an animation shows every step-th frame, the smallest step at or under this rate
+MAX_SECONDS = 10.0  # an animation's default length: a long clip is cut here (``seconds`` shows more)
+NO_FFMPEG = "writing .mp4 needs ffmpeg on PATH, which was not found; .gif previews work without it"
+_TRIANGLE_CODES = np.array([1, 2, 2, 79], dtype=np.uint8)  # a matplotlib Path's MOVETO, LINETO, LINETO, CLOSEPOLY
+
+
+def animation_frames(motion: Motion, result: PipelineResult, *, start: float = 0.0, seconds: float | None = None,
+                     max_fps: float = MAX_FPS) -> tuple[np.ndarray, float]:
+    """The output frames an animated preview shows, and the seconds each one is shown.
+
+    Every ``step``-th frame of `preview_window` (``seconds`` default: the motion, cut at
+    `MAX_SECONDS`), the smallest step that plays at or under ``max_fps``, so that playback runs
+    at the clip's speed: 120 fps plays every 6th frame at 20 fps, 30 fps every 2nd at 15 fps.
+    A window of two frames or more always shows at least two.
+    """
+    check_number("max_fps", max_fps, 0.0, 1000.0, low_open=True)
+    begin, end = preview_window(motion, result, start=start, seconds=MAX_SECONDS if seconds is None else seconds)
+    if seconds is None and end < result.world_positions.shape[0]:
+        log.warning("the animation shows %.3g s from %g s of a longer motion; --seconds shows more",
+                    (end - begin) * motion.frame_time, start)
+    step = max(1, math.ceil(motion.fps / max_fps - 1e-3))  # a Frame Time of 0.008333 is 120 fps
+    step = min(step, max(end - begin - 1, 1))
+    return np.arange(begin, end, step), step * motion.frame_time
+
+
+def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
+                  height: int = 320, skin: Skin | None = None) -> Iterator[np.ndarray]:
+    """RGB pictures ``(H, W, 3) uint8``, one per output frame of ``frames``: the captured body
+    (left, grey) and the exaggerated one (right, orange) side by side, one camera, one scale.
+
+    height : pixels of the body panels; a title and a frame label add 40. ``H`` and ``W`` are even
+    (as H.264 wants) and the same for every picture.
+    The view covers every vertex of both bodies in every frame (`view_limits`). The camera
+    follows the captured root across when it travels (`camera_centres`); ticks on the ground
+    then scroll by with the travel. Both bodies are posed and shaded for many frames at once;
+    the loop draws.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import LineCollection, PathCollection
+    from matplotlib.figure import Figure
+    from matplotlib.path import Path as Path2D
+
+    frames = np.asarray(frames, dtype=np.int64)
+    bodies = pose_bodies(motion, result, frames, skin)
+    right, up, _ = bodies.axes
+    points = bodies.screen_points()
+    tall = motion.skeleton.height()
+    shown_seconds = (frames[1] - frames[0]) * motion.frame_time if len(frames) > 1 else motion.frame_time
+    centre = camera_centres(bodies.root[:, right], points, tall, max(0.4 / shown_seconds, 1.0))
+    half, low, high = view_limits(points, centre)
+    panel_h = max(int(height), 16)
+    panel_w = math.ceil(panel_h * 2.0 * half / (high - low))
+    half = 0.5 * panel_w / panel_h * (high - low)  # the panel's own scale: at least the fitted half width
+    top, bottom, gap = 22, 18, 10
+    gap += (2 * panel_w + gap) % 2
+    bottom += (panel_h + top + bottom) % 2
+    width_px, height_px = 2 * panel_w + gap, panel_h + top + bottom
+    figure = Figure(figsize=(width_px / 100, height_px / 100), dpi=100, facecolor="white")
+    canvas = FigureCanvasAgg(figure)
+    # The ground: the lowest the captured body goes (the exaggerated one may go through it).
+    floor = float(bodies.captured[..., up].min() if bodies.captured.shape[1] else bodies.root[:, up].min())
+    spacing = (tall if tall > 0 else high - low) / 4.0
+    ticks = np.arange(math.floor((centre.min() - half) / spacing), math.ceil((centre.max() + half) / spacing) + 1)
+    tick = 0.025 * (high - low)
+    panels = []
+    for number, (vertices, faces, color, title, ink) in enumerate((
+            (bodies.captured, bodies.captured_faces, CAPTURED_COLOR, "captured", (0.35, 0.35, 0.38)),
+            (bodies.exaggerated, bodies.exaggerated_faces, EXAGGERATED_COLOR, "exaggerated", (0.8, 0.42, 0.08)))):
+        left = number * (panel_w + gap)
+        ax = figure.add_axes((left / width_px, bottom / height_px, panel_w / width_px, panel_h / height_px))
+        ax.set_ylim(low, high)
+        ax.axis("off")
+        ax.axhline(floor, color=(0.8, 0.8, 0.82), linewidth=1.0, zorder=1)
+        ax.add_collection(LineCollection([[(x * spacing, floor), (x * spacing, floor - tick)] for x in ticks],
+                                         colors=[(0.8, 0.8, 0.82)], linewidths=1.0, zorder=1))
+        # One Path per triangle, made once, each a view into ``corners``: a frame is drawn by
+        # writing its sorted triangles into ``corners`` (set_verts would build thousands of Paths).
+        corners = np.zeros((len(faces), 4, 2))
+        polygons = PathCollection([Path2D(c, _TRIANGLE_CODES) for c in corners], edgecolors="none", zorder=2)
+        ax.add_collection(polygons)
+        figure.text((left + panel_w / 2) / width_px, 1 - 4 / height_px, title, ha="center", va="top", fontsize=9,
+                    color=ink)
+        panels.append((ax, polygons, corners, vertices, faces, color))
+    label = figure.text(0.5, 3 / height_px, "", ha="center", va="bottom", fontsize=8, color=(0.3, 0.3, 0.3))
+    first = result.first
+    chunk = 32
+    for begin in range(0, len(frames), chunk):
+        shaded = [shaded_triangles(vertices[begin:begin + chunk], faces, bodies.axes, color)
+                  for *_, vertices, faces, color in panels]
+        for offset in range(len(shaded[0][0])):
+            k = begin + offset
+            for (ax, polygons, corners, *_), (triangles, colors) in zip(panels, shaded):
+                corners[:, :3] = triangles[offset]
+                corners[:, 3] = triangles[offset, :, 0]
+                polygons.set_facecolor(colors[offset])  # marks the collection for redrawing
+                ax.set_xlim(centre[k] - half, centre[k] + half)
+            label.set_text(f"frame {frames[k]}   {(frames[k] - first) * motion.frame_time:.2f} s")
+            canvas.draw()
+            yield np.asarray(canvas.buffer_rgba())[:height_px, :width_px, :3].copy()
+
+
+def _gif_palette() -> np.ndarray:
+    """``(256, 3) uint8``: one fixed palette for every GIF frame, so that the frames do not flicker
+    and the bytes do not depend on what was drawn first. Each body colour at 24 shades, each
+    also blended 3 ways into the white ground (the anti-aliased edges), and 64 greys (text,
+    ground, white)."""
+    colors = [alpha * shade * np.asarray(color) + (1.0 - alpha)
+              for color in (CAPTURED_COLOR, EXAGGERATED_COLOR)
+              for shade in np.linspace(0.35, 1.0, 24)
+              for alpha in (1.0, 0.7, 0.4, 0.15)]
+    colors += [np.full(3, grey) for grey in np.linspace(0.0, 1.0, 256 - len(colors))]
+    return np.round(255 * np.asarray(colors)).astype(np.uint8)
+
+
+def _indexed(rgb: np.ndarray, palette: np.ndarray, lookup: np.ndarray):
+    """A P-mode picture of ``rgb (H, W, 3) uint8``, each pixel the nearest ``palette (256, 3)`` colour.
+
+    lookup : (2**24,) int16, the palette index of each packed RGB colour, -1 where not yet
+    known; filled in here, so that later frames only search for colours not seen before.
+    Exactly the nearest (Pillow's own mapping rounds colours to a coarse cache first and
+    would turn the white ground light grey).
+    """
+    from PIL import Image
+
+    packed = (rgb[..., 0].astype(np.int32) << 16) | (rgb[..., 1].astype(np.int32) << 8) | rgb[..., 2]
+    index = lookup[packed]
+    unknown = np.unique(packed[index < 0])
+    if len(unknown):
+        distinct = np.stack([unknown >> 16, (unknown >> 8) & 255, unknown & 255], axis=-1)
+        distance = ((distinct[:, None, :] - palette[None].astype(np.int32)) ** 2).sum(axis=-1)
+        lookup[unknown] = np.argmin(distance, axis=1)
+        index = lookup[packed]
+    picture = Image.fromarray(index.astype(np.uint8), mode="P")
+    picture.putpalette(palette.ravel().tolist())
+    return picture
+
+
+def gif_durations(count: int, frame_seconds: float) -> list[int]:
+    """Milliseconds each of ``count`` frames is shown: multiples of 10 (a GIF counts
+    centiseconds), alternating where needed so that the loop keeps the clip's time
+    (at 15 fps: 70, 60, 70, ... ms; rounding errors do not add up)."""
+    ends = np.round(np.arange(count + 1) * frame_seconds * 100.0).astype(np.int64)
+    return [int(d) * 10 for d in np.diff(ends)]
+
+
+def render_gif(motion: Motion, result: PipelineResult, *, start: float = 0.0, seconds: float | None = None,
+               max_fps: float = MAX_FPS, height: int = 320, skin: Skin | None = None) -> bytes:
+    """A looping animated GIF: captured (left) and exaggerated (right) side by side at the clip's
+    speed, at most ``max_fps`` (up to 50: GIF viewers slow faster frames down); frames from
+    `animation_frames`, pictures from `render_frames`. The same bytes every time."""
+    check_number("max_fps", max_fps, 0.0, 50.0, low_open=True)
+    frames, frame_seconds = animation_frames(motion, result, start=start, seconds=seconds, max_fps=max_fps)
+    palette = _gif_palette()
+    lookup = np.full(1 << 24, -1, dtype=np.int16)
+    pictures = [_indexed(rgb, palette, lookup) for rgb in render_frames(motion, result, frames, height=height, skin=skin)]
+    buffer = io.BytesIO()
+    pictures[0].save(buffer, format="GIF", save_all=True, append_images=pictures[1:], loop=0,
+                     duration=gif_durations(len(pictures), frame_seconds))
+    return buffer.getvalue()
+
+
+def render_mp4(motion: Motion, result: PipelineResult, *, start: float = 0.0, seconds: float | None = None,
+               max_fps: float = MAX_FPS, height: int = 320, skin: Skin | None = None) -> bytes:
+    """The animation of `render_gif` as an H.264 MP4, encoded by ffmpeg (raw RGB piped in).
+
+    ConfigError when ffmpeg is not on PATH; OSError with ffmpeg's message when it fails.
+    """
+    ffmpeg = shutil.which("ffmpeg")
+    if ffmpeg is None:
+        raise ConfigError(NO_FFMPEG)
+    frames, frame_seconds = animation_frames(motion, result, start=start, seconds=seconds, max_fps=max_fps)
+    pictures = render_frames(motion, result, frames, height=height, skin=skin)
+    picture = next(pictures)
+    with tempfile.TemporaryDirectory(prefix="mocap-preview-") as folder:
+        target, messages = Path(folder) / "preview.mp4", Path(folder) / "ffmpeg.log"
+        command = [ffmpeg, "-nostdin", "-hide_banner", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24",
+                   "-s", f"{picture.shape[1]}x{picture.shape[0]}", "-framerate", f"{1.0 / frame_seconds:.6g}",
+                   "-i", "-", "-an", "-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", "20",
+                   "-movflags", "+faststart", "-f", "mp4", str(target)]
+        with open(messages, "wb") as log_file:
+            process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log_file)
+            try:
+                process.stdin.write(picture.tobytes())
+                for picture in pictures:
+                    process.stdin.write(picture.tobytes())
+            except BrokenPipeError:
+                pass  # ffmpeg stopped early; its own message is reported below
+            finally:
+                process.stdin.close()
+                code = process.wait()
+        if code != 0 or not target.exists():
+            said = [line for line in messages.read_text(errors="replace").splitlines() if line.strip()]
+            raise OSError(f"ffmpeg could not write the MP4 (exit {code}): {said[-1] if said else 'no message'}")
+        return target.read_bytes()
