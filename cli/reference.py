@@ -5,7 +5,7 @@
 `tests/test_docs.py` checks the committed pages equal what this prints, so the reference
 never drifts from the code. The settings page reads each block's dataclass (its fields,
 defaults and the docstring lines that describe them), the shipped presets, and which flag
-sets each key, from the command line's own table of them (`main.FLAG_KEYS`).
+sets each key, from the command line's own table of them (`options.FLAG_KEYS`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ import click
 
 from mocap_exaggerate.config import PipelineConfig, load_preset, preset_names
 
-from .main import FLAG_KEYS, cli
+from .main import cli
+from .options import FLAG_KEYS
 
 __all__ = ["cli_reference", "config_reference", "write_reference"]
 
@@ -37,7 +38,7 @@ def cli_reference() -> str:
            "Every command also takes `-v` (say more on stderr) and `-q` (only errors), before or after the "
            "command's name, and `-h`/`--help`. Exit codes: 0 done; 1 a file could not be read or written for a "
            "reason outside the options, or some of several clips failed; 2 bad input, a bad option or a "
-           "refusal.\n"]
+           "refusal; 3 an internal error (a bug: one line says so, `-vv` shows the traceback).\n"]
     root = click.Context(cli, info_name="mocap-exaggerate", **cli.context_settings)
     for name in cli.list_commands(root):
         command = cli.get_command(root, name)
@@ -88,7 +89,7 @@ def _field_docs(cls: type) -> dict[str, str]:
 
 
 def _flags() -> dict[str, str]:
-    """Setting key -> the flag that sets it, from the command line's own table (`main.FLAG_KEYS`)."""
+    """Setting key -> the flag that sets it, from the command line's own table (`options.FLAG_KEYS`)."""
     command = cli.get_command(click.Context(cli), "exaggerate")
     options = {p.name: "/".join(p.opts + p.secondary_opts) for p in command.params if isinstance(p, click.Option)}
     return {f"{block}.{key}": options[name] for name, block, key, _ in FLAG_KEYS}
@@ -140,7 +141,8 @@ def config_reference() -> str:
                "`pivot`, `ease_in`, `ease_out`, `blend`, `release`; the flag `--stretch` takes the same as "
                "`LIMB:START-END:SCALE[:key=value...]`), `[[target]]` (`joint`, `frame`, optionally `position`; "
                "`--target JOINT@FRAME[=X,Y,Z]`), `[limbs]` (a limb's name = its joints from base to end, for rigs "
-               "the finder does not know) and `description` (a line of text).\n")
+               "the finder does not know), `description` (a line of text) and `preset` (the shipped preset the "
+               "file's blocks are laid over when `--preset` is not given; a run writes the one it used).\n")
     return "".join(out)
 
 

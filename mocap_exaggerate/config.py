@@ -2,7 +2,8 @@
 
 A pipeline is the ordered list of blocks that are switched on. Its whole
 declaration is a `PipelineConfig`, which round-trips through TOML; the same
-declaration and input give the same output, byte for byte. Precedence when
+declaration and input give the same output, byte for byte: the BVH, and with
+its ``[glb]`` block the GLB and the skin weights too. Precedence when
 resolving one: shipped preset < config file < explicit overrides.
 """
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import os
+import re
 import tomllib
 from dataclasses import asdict, dataclass, field, fields
 from importlib import resources
@@ -28,6 +30,8 @@ from .stages.subjoints import SubjointConfig
 __all__ = [
     "InputConfig",
     "OutputConfig",
+    "GlbConfig",
+    "GLB_UNITS",
     "PipelineConfig",
     "DEFAULT_PRESET",
     "preset_names",
@@ -35,6 +39,7 @@ __all__ = [
     "preset_description",
     "resolve_config",
     "read_config_text",
+    "config_preset",
     "merge_tables",
 ]
 
@@ -97,6 +102,58 @@ class OutputConfig:
         check_flag("output.preserve_volume", self.preserve_volume)
 
 
+#: ``glb.units``: ``auto`` or metres per unit by name (the same names as `mocap_exaggerate.io.gltf.UNITS`,
+#: which this light module does not import).
+GLB_UNITS = ("auto", "m", "dm", "cm", "mm", "in", "ft", "cmu")
+_INFLUENCES = (4, 8)
+#: The ``[glb]`` keys that name a file, each with the key of its SHA-256.
+GLB_FILES = (("skin", "skin_sha256"), ("joint_map", "joint_map_sha256"))
+
+
+@dataclass(frozen=True, kw_only=True)
+class GlbConfig:
+    """The skinned GLB and the re-weighted skin written beside the BVH.
+
+    enabled : write ``<name>.glb`` and ``<name>.weights.npz`` (false: the BVH alone, ``--no-glb``)
+    units : what one BVH unit is, for the GLB's metres: ``auto`` (centimetres for skeletons over
+        50 units tall, metres under 3, else scaled to a 1.7 m figure), ``m``, ``dm``, ``cm``, ``mm``,
+        ``in``, ``ft`` or ``cmu`` (CMU's 1/0.45 inch)
+    influences : joints per vertex, 4 (JOINTS_0) or 8 (a second JOINTS_1/WEIGHTS_1 set)
+    skin : the character file (a skinned ``.glb``/``.gltf``, a MakeHuman ``.obj``, an ``.npz``);
+        empty for the rubber body grown from the skeleton. A relative path is relative to the
+        folder of the pipeline file that holds it (a run writes it so)
+    skin_sha256 : the SHA-256 of the skin file's bytes when the run was made (hex); a rebuild
+        from a skin with other bytes warns that the GLB may differ. Empty: not checked
+    joint_map : a file of ``clip joint = skin joint`` lines for the pairs the automatic pairing
+        misses (with ``skin``); relative as ``skin``
+    joint_map_sha256 : the joint map file's SHA-256, checked as ``skin_sha256``
+    """
+
+    enabled: bool = True
+    units: str = "auto"
+    influences: int = 4
+    skin: str = ""
+    skin_sha256: str = ""
+    joint_map: str = ""
+    joint_map_sha256: str = ""
+
+    def __post_init__(self) -> None:
+        check_flag("glb.enabled", self.enabled)
+        check_choice("glb.units", self.units, GLB_UNITS)
+        if isinstance(self.influences, bool) or not isinstance(self.influences, int) or self.influences not in _INFLUENCES:
+            raise ConfigError(f"glb.influences must be 4 or 8, got {self.influences!r:.60}")
+        for key, digest_key in GLB_FILES:
+            path, digest = getattr(self, key), getattr(self, digest_key)
+            if not isinstance(path, str) or "\x00" in path or len(path) > 4096:
+                raise ConfigError(f"glb.{key} must be a file's path (or empty), got {path!r:.60}")
+            if not isinstance(digest, str) or digest and not re.fullmatch(r"[0-9a-f]{64}", digest):
+                raise ConfigError(f"glb.{digest_key} must be 64 hex digits (or empty), got {digest!r:.80}")
+            if digest and not path:
+                raise ConfigError(f"glb.{digest_key} is given without glb.{key}")
+        if self.joint_map and not self.skin:
+            raise ConfigError("glb.joint_map pairs the clip's joints with a skin's: give the skin too (--skin, glb.skin)")
+
+
 _BLOCKS = {
     "input": InputConfig,
     "extrapolate": ExtrapolateConfig,
@@ -106,6 +163,7 @@ _BLOCKS = {
     "springs": SpringConfig,
     "contacts": ContactConfig,
     "output": OutputConfig,
+    "glb": GlbConfig,
 }
 
 
@@ -119,6 +177,7 @@ class PipelineConfig:
     subjoints: SubjointConfig = field(default_factory=SubjointConfig)
     springs: SpringConfig = field(default_factory=SpringConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
+    glb: GlbConfig = field(default_factory=GlbConfig)
     auto_stretch: AutoStretchConfig = field(default_factory=AutoStretchConfig)
     contacts: ContactConfig = field(default_factory=ContactConfig)
     stretch: tuple[StretchSpec, ...] = ()
@@ -133,6 +192,9 @@ class PipelineConfig:
             raise ConfigError(f"{source}: expected a table of blocks")
         blocks: dict[str, Any] = {}
         for key, value in data.items():
+            if key == "preset":  # where the settings started: the base a file's blocks are laid over
+                _check_preset_key(value, source)
+                continue
             if key == "description":
                 if not isinstance(value, str):
                     raise ConfigError(f"{source}: description must be text")
@@ -161,7 +223,7 @@ class PipelineConfig:
                 values[name] = item
             if key == "extrapolate" and "weights" in values:
                 values["weights"] = _weights_from_table(values["weights"], source)
-            for integer in ("max_iter", "per_link"):
+            for integer in ("max_iter", "per_link", "influences"):
                 if isinstance(values.get(integer), float) and values[integer].is_integer():
                     values[integer] = int(values[integer])
             for listed in ("groups", "rigid", "joints"):
@@ -202,14 +264,22 @@ class PipelineConfig:
         return out
 
     @classmethod
-    def from_toml(cls, text: str, *, source: str = "config") -> PipelineConfig:
-        return cls.from_dict(_parse_toml(text, source), source=source)
+    def from_toml(cls, text: str, *, source: str = "config", folder: str | os.PathLike | None = None) -> PipelineConfig:
+        """The declaration in ``text``; relative file paths in it (``glb.skin``, ``glb.joint_map``)
+        taken from ``folder`` when given (the folder of the file the text came from)."""
+        table = _parse_toml(text, source)
+        return cls.from_dict(_paths_from(table, folder) if folder is not None else table, source=source)
 
-    def to_toml(self) -> str:
-        """The declaration as TOML text; `from_toml` of it gives an equal config."""
+    def to_toml(self, *, preset: str | None = None) -> str:
+        """The declaration as TOML text; `from_toml` of it gives an equal config.
+
+        preset : the shipped preset it was resolved from, written first as ``preset = "..."``
+            (read back as the base its blocks are laid over; the blocks hold every setting)
+        """
         import tomli_w
 
-        return tomli_w.dumps(self.to_dict())
+        table = self.to_dict()
+        return tomli_w.dumps({"preset": preset, **table} if preset else table)
 
 
 def _parse_toml(text: str, source: str) -> dict[str, Any]:
@@ -235,6 +305,31 @@ def read_config_text(path: str | os.PathLike) -> str:
         return data.decode("utf-8")
     except UnicodeDecodeError as error:
         raise ConfigError(f"{path}: not UTF-8 text (byte {error.start} is 0x{data[error.start]:02x})") from None
+
+
+def _check_preset_key(value: Any, source: str) -> str:
+    if not isinstance(value, str) or value not in preset_names():
+        raise ConfigError(f"{source}: preset must name a shipped preset ({', '.join(preset_names())}), got {value!r:.60}")
+    return value
+
+
+def _paths_from(table: dict[str, Any], folder: str | os.PathLike) -> dict[str, Any]:
+    """``table`` with its relative ``[glb]`` file paths joined to ``folder`` (a copy; absolute and empty ones kept)."""
+    glb = table.get("glb")
+    if not isinstance(glb, dict):
+        return table
+    glb = dict(glb)
+    for key, _ in GLB_FILES:
+        path = glb.get(key)
+        if isinstance(path, str) and path and "\x00" not in path and not os.path.isabs(path):
+            glb[key] = os.path.join(folder, path)
+    return {**table, "glb": glb}
+
+
+def config_preset(text: str, *, source: str = "config") -> str | None:
+    """The preset a pipeline file names (``preset = "looney"``, as a run writes it), or None."""
+    value = _parse_toml(text, source).get("preset")
+    return None if value is None else _check_preset_key(value, source)
 
 
 def _tables_from_list(items: Any, source: str, key: str, spec: type, required: set[str]) -> tuple:
@@ -322,19 +417,39 @@ def merge_tables(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _laid_over(base: dict[str, Any], top: dict[str, Any]) -> dict[str, Any]:
+    """``top`` merged over ``base``; a file ``top`` names (the skin) forgets the SHA-256 ``base``
+    recorded for another, unless ``top`` gives one too: a hash belongs to the path beside it."""
+    out = merge_tables(base, top)
+    named = top.get("glb") if isinstance(top.get("glb"), dict) else {}
+    for key, digest_key in GLB_FILES:
+        if key in named and digest_key not in named and isinstance(out.get("glb"), dict):
+            out["glb"][digest_key] = ""
+    return out
+
+
 def resolve_config(
     preset: str | None = DEFAULT_PRESET,
     config_text: str | None = None,
     overrides: dict[str, Any] | None = None,
     *,
     config_source: str = "config",
+    config_folder: str | os.PathLike | None = None,
 ) -> PipelineConfig:
-    """Shipped preset < config file < explicit overrides (nested tables), validated."""
-    table: dict[str, Any] = _preset_table(preset) if preset else {}
+    """Shipped preset < config file < explicit overrides (nested tables), validated.
+
+    config_folder : the folder of the config file: relative file paths in it (``glb.skin``,
+        ``glb.joint_map``) are relative to it, so a written pipeline file works from any
+        working folder; None leaves them relative to the working folder (as overrides are)
+    """
+    table: dict[str, Any] = _preset_table(preset) if preset is not None else {}
     if config_text is not None:
         file_table = _parse_toml(config_text, config_source)
+        if config_folder is not None:
+            file_table = _paths_from(file_table, config_folder)
         PipelineConfig.from_dict(file_table, source=config_source)  # name the file in its own errors
-        table = merge_tables(table, file_table)
+        table = _laid_over(table, file_table)
     if overrides:
-        table = merge_tables(table, overrides)
+        table = _laid_over(table, overrides)
+    table.pop("preset", None)
     return PipelineConfig.from_dict(table, source=config_source if config_text is not None else "options")

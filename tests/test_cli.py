@@ -376,6 +376,7 @@ def test_a_bad_set_is_one_line_and_writes_nothing(tmp_path, setting, says):
 @pytest.mark.parametrize(("option", "says"), [
     (["--sigma", "bad"], "sigma"), (["--units", "furlong"], "furlong"), (["--skin", "missing.glb"], "missing.glb"),
     (["--influences", "5"], "influences"), (["--path-file", "missing.json"], "missing.json"),
+    (["--set", "glb.units=furlong"], "furlong"), (["--joint-map", "missing.map"], "give the skin too"),
 ])
 def test_a_bad_option_is_said_before_an_existing_output(tmp_path, option, says):
     # Told about the option first: not "exists, pass --overwrite", then the option after --overwrite.
@@ -387,3 +388,69 @@ def test_a_bad_option_is_said_before_an_existing_output(tmp_path, option, says):
     done = subprocess.run(main + option, capture_output=True, text=True, cwd=tmp_path)
     assert done.returncode == 2 and says in done.stderr and "exists" not in done.stderr, done.stderr
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+#: A bad value for every option of 'exaggerate' that takes one (and the GLB's settings by --set and
+#: --config), with words of the one line that must say so.
+BAD_OPTIONS = [
+    (["--name", "../x"], "name"), (["--units", "furlong"], "glb.units"), (["--influences", "5"], "--influences"),
+    (["--skin", "missing.glb"], "missing.glb"), (["--joint-map", "missing.map"], "give the skin too"),
+    (["--skin", "hero.glb", "--joint-map", "missing.map"], "missing.map"), (["--path-file", "missing.json"], "missing.json"),
+    (["--trails", "."], "directory"), (["--glb=yes"], "--glb"), (["--preset", "wild"], "unknown preset"),
+    (["--preset", ""], "unknown preset"), (["--config", "missing.toml"], "missing.toml"), (["--config", ""], "empty"),
+    (["--sigma", "bad"], "sigma"), (["--omega", "x"], "--omega"), (["--omega", "99"], "extrapolate.omega"),
+    (["--weight", "Hips"], "NAME=WEIGHT"), (["--threshold", "-1"], "correct.threshold"), (["--delta", "0"], "correct.delta"),
+    (["--max-stretch", "0.5"], "correct.max_stretch"), (["--max-iter", "0"], "correct.max_iter"),
+    (["--subjoints", "0"], "subjoints.per_link"), (["--sublink-length", "long"], "subjoints.sublink_length"),
+    (["--stiffness", "-5"], "springs.stiffness"), (["--link-stiffness", "-5"], "springs.link_stiffness"),
+    (["--damping", "-1"], "springs.damping"), (["--blend", "2"], "springs.blend"), (["--skeleton", "both"], "--skeleton"),
+    (["--bvh-positions", "sideways"], "--bvh-positions"), (["--stretch", "left_arm:20-60"], "--stretch"),
+    (["--contacts", "on"], "--contacts"), (["--anchor", "moon"], "--anchor"), (["--target", "rFoot"], "JOINT@FRAME"),
+    (["--tpose", "maybe"], "--tpose"), (["--fps", "nan"], "input.fps"), (["--root-offset", "both"], "--root-offset"),
+    (["--up", "w"], "--up"), (["--set", "springs.blend=2"], "springs.blend"), (["--set", "glb.influences=5"], "glb.influences"),
+    (["--set", "glb.skin=missing.glb"], "missing.glb"), (["--config", "glb.toml"], "glb.toml: glb.units"),
+]
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory):
+    """A folder holding a run's outputs, and a character (this clip's own GLB, from another run) beside it."""
+    folder = tmp_path_factory.mktemp("taken")
+    clip = SAMPLE_DIR / "cmu_09_01_run_daz.bvh"
+    result = CliRunner().invoke(cli, ["exaggerate", str(clip), "-o", str(folder / "character"), "--subjoints", "2"])
+    assert result.exit_code == 0, result.stderr
+    shutil.copy(folder / "character" / f"{clip.stem}.glb", folder / "hero.glb")
+    (folder / "glb.toml").write_text('[glb]\nunits = "furlong"\n')
+    result = CliRunner().invoke(cli, ["exaggerate", str(clip), "-o", str(folder / "out"), "--subjoints", "2"])
+    assert result.exit_code == 0, result.stderr
+    return folder
+
+
+@pytest.mark.parametrize(("option", "says"), BAD_OPTIONS, ids=[" ".join(a) for a, _ in BAD_OPTIONS])
+def test_every_option_is_checked_before_the_outputs_there(finished_run, monkeypatch, option, says):
+    # An output folder with a finished run in it: the bad option is what is said, not "exists, pass --overwrite".
+    monkeypatch.chdir(finished_run)
+    out = finished_run / "out"
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    result = CliRunner().invoke(cli, ["exaggerate", str(SAMPLE_DIR / "cmu_09_01_run_daz.bvh"), "-o", str(out), *option])
+    assert result.exit_code == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and says in lines[0] and "exists" not in lines[0], result.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_the_glb_settings_come_from_a_config_file_and_the_flags_win(runner, sample_clip, tmp_path):
+    config = tmp_path / "conf" / "p.toml"
+    config.parent.mkdir()
+    config.write_text('[glb]\nunits = "cm"\ninfluences = 8\n')
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "a"), "--config", str(config)])
+    assert result.exit_code == 0, result.stderr
+    info = json.loads((tmp_path / "a" / "cmu_09_01_run_daz.json").read_text())
+    assert info["outputs"]["units"] == "cm" and info["config"]["glb"]["influences"] == 8
+    result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "b"), "--config", str(config),
+                                 "--units", "m", "--no-glb"])
+    assert result.exit_code == 0, result.stderr
+    info = json.loads((tmp_path / "b" / "cmu_09_01_run_daz.json").read_text())
+    assert info["config"]["glb"] == {"enabled": False, "units": "m", "influences": 8, "skin": "", "skin_sha256": "",
+                                     "joint_map": "", "joint_map_sha256": ""}
+    assert "glb" not in info["outputs"]

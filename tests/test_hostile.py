@@ -418,3 +418,120 @@ def test_option_values_end_in_success_or_one_line(tmp_path_factory, picked, data
         assert not (folder / "out").exists(), args
     assert clip.read_bytes() == SHORT
     assert {p.name for p in folder.iterdir()} <= {"clip.bvh", "out"}, args
+
+
+# ---------------------------------------------------------------------------- every option, hostile values
+
+#: Values no option should choke on: empty, not numbers, out of range, huge, long, two lines, not UTF-8.
+HOSTILE = [b"", b"nan", b"inf", b"-1", b"1e309", b"x" * 2000, b"a\nb", b"\xff\xfe"]
+#: Where each command starts from (quick: a short clip, two sub-links, no GLB where it can).
+BASE = {"exaggerate": ["exaggerate", "clip.bvh", "-o", "out", "--no-glb", "--subjoints", "2"],
+        "batch": ["batch", "in", "out", "--no-glb", "--subjoints", "2", "-j", "1"],
+        "plan": ["plan", "in", "out"],
+        "preview": ["preview", "clip.bvh", "-o", "p.png", "--subjoints", "2", "--frames", "1"],
+        "info": ["info", "clip.bvh"]}
+#: Hostile values an option takes as they are: any text names a folder or a file to write, and a
+#: preview may show every second there is.
+TAKEN = {("exaggerate", "--output"): {b"nan", b"inf", b"-1", b"1e309", b"a\nb", b"\xff\xfe"},
+         ("exaggerate", "--name"): {b"nan", b"inf", b"-1", b"1e309", b"\xff\xfe"},
+         ("exaggerate", "--trails"): {b"nan", b"inf", b"-1", b"1e309", b"a\nb", b"\xff\xfe"},
+         ("preview", "--seconds"): {b"inf", b"1e309"}}
+
+
+def _swept_options() -> list:
+    """(command, option) for every option of every command; the options a command shares with
+    'exaggerate' (the same decorators) are swept there once."""
+    import click as _click
+
+    root = _click.Context(cli)
+    shared = {(tuple(p.opts), p.help) for p in cli.get_command(root, "exaggerate").params}
+    params = []
+    for name in BASE:
+        for param in cli.get_command(root, name).params:
+            if not isinstance(param, _click.Option) or param.name in ("verbose", "quiet", "help"):
+                continue
+            if name != "exaggerate" and (tuple(param.opts), param.help) in shared:
+                continue
+            params.append(pytest.param(name, param.opts[-1], param.is_flag, id=f"{name} {param.opts[-1]}"))
+    return params
+
+
+@pytest.mark.parametrize(("command", "option", "is_flag"), _swept_options())
+def test_every_option_refuses_hostile_values_in_one_line(tmp_path, command, option, is_flag):
+    import os
+
+    work = tmp_path / "work"
+    (work / "in").mkdir(parents=True)
+    for target in (work / "clip.bvh", work / "in" / "clip.bvh"):
+        target.write_bytes(SHORT)
+    values = [b"nan"] if is_flag else HOSTILE  # a flag given a value: --glb=nan
+    for value in values:
+        words = [option.encode() + b"=" + value] if is_flag else [option.encode(), value]
+        before = snapshot(work)
+        done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", *BASE[command], *words], cwd=work,
+                              capture_output=True, timeout=300)
+        stderr = os.fsdecode(done.stderr)
+        shown = f"{command} {option} {value[:20]!r}: {stderr[:300]}"
+        assert "Traceback" not in stderr, shown
+        if value in TAKEN.get((command, option), ()):
+            assert done.returncode == 0, shown
+            for made in sorted(set(snapshot(work)) - set(before), reverse=True):  # cleared for the next value
+                path = work / made
+                path.unlink() if path.is_file() else path.rmdir()
+            continue
+        lines = stderr.strip().splitlines()
+        assert done.returncode == 2, shown
+        assert len(lines) == 1 and lines[0].startswith("Error: ") and len(lines[0]) < 1000, shown
+        assert snapshot(work) == before, f"{shown}: a refused run wrote something"
+
+
+# ---------------------------------------------------------------------------- internal errors
+
+#: Runs the command line in a new process with one function replaced by one that raises
+#: RuntimeError: a bug, wherever it is met (an option's callback, the command, a worker thread).
+BROKEN = """
+import importlib, sys
+module, name = sys.argv[1].rsplit(":", 1)
+owner = importlib.import_module(module)
+*path, attribute = name.split(".")
+for part in path:
+    owner = getattr(owner, part)
+def broken(*args, **kwargs):
+    raise RuntimeError("a bug planted by the test")
+setattr(owner, attribute, broken)
+sys.argv = ["mocap-exaggerate", *sys.argv[2:]]
+from mocap_exaggerate_cli.main import main
+main()
+"""
+
+
+@pytest.mark.parametrize(("where", "args"), [
+    # --set's callback reads its value as TOML
+    ("tomllib:loads", ["--set", "springs.blend=0.3"]),
+    # the type every path option and argument converts through
+    ("mocap_exaggerate_cli.options:FilePath.convert", []),
+    # the config, read in the command's body
+    ("mocap_exaggerate_cli.options:resolve_config", []),
+    # the GLB, built in a worker thread while the BVH is being written
+    ("mocap_exaggerate.jobs.outputs:glb_files", []),
+    # the BVH's text, written into the set
+    ("mocap_exaggerate.jobs.job:iter_bvh", []),
+])
+def test_an_internal_error_is_one_line_exit_3_and_writes_nothing(tmp_path, where, args):
+    clip = tmp_path / "clip.bvh"
+    clip.write_bytes(SHORT)
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-c", BROKEN, where, "exaggerate", str(clip), "-o", str(out), *args],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode == 3, done.stderr
+    assert "Traceback" not in done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("Error: internal error (RuntimeError: a bug planted by the test)")
+    assert "-vv" in lines[0]
+    assert not out.exists(), sorted(p.name for p in out.iterdir())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.bvh"]
+    # -vv, before or after the options, shows where it happened.
+    done = subprocess.run([sys.executable, "-c", BROKEN, where, "exaggerate", str(clip), "-o", str(out), *args, "-vv"],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode == 3 and "Traceback" in done.stderr and "a bug planted by the test" in done.stderr
+    assert done.stderr.strip().splitlines()[-1].startswith("Error: internal error")

@@ -6,6 +6,9 @@ or a farm task calls: it takes a path, bytes or a stream, writes
 ``.json`` manifest into a folder (or the BVH alone to a stream), and returns
 a `JobRecord`. Every target is checked before anything runs, and the files
 are written as one set, manifest last: a refusal or a failure writes nothing.
+The ``.pipeline.toml`` is the whole declaration as used, the GLB's options,
+character and joint map included (`recorded_config`): read with ``--config``
+from any folder, it rebuilds the same bytes.
 
 Example::
 
@@ -16,11 +19,12 @@ Example::
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -28,8 +32,8 @@ import numpy as np
 
 from ..analysis.limbs import find_limbs
 from ..analysis.tpose import detect_rest_frames
-from ..config import DEFAULT_PRESET, PipelineConfig, load_preset
-from ..core.errors import ConfigError
+from ..config import DEFAULT_PRESET, GlbConfig, PipelineConfig, load_preset
+from ..core.errors import ConfigError, InputError
 from ..core.motion import Motion
 from ..io.bvh import iter_bvh, read_bvh, read_source
 from ..io.files import OutputExistsError, OutputSet, remove_stale_temporaries, same_file
@@ -38,7 +42,7 @@ from ..rig.skinning import Skin
 from .outputs import file_digest
 
 __all__ = ["JobRecord", "convert", "output_paths", "check_name", "check_targets", "check_output_set", "describe",
-           "parameters_digest"]
+           "parameters_digest", "recorded_config"]
 
 #: Longest output name accepted: leaves room for suffixes and temporary names within 255 bytes.
 MAX_NAME = 200
@@ -56,7 +60,8 @@ class JobRecord:
     max_link_stretch : largest link length over its rest length, after the stretch pass
     seconds : wall time of the whole job
     timings : seconds per step (read, each stage, write, glb), as in the manifest
-    warnings : what the reader noticed in the input (extra lines, a frame rate overridden)
+    warnings : what the reader noticed in the input (extra lines, a frame rate overridden), and a
+        skin or joint map whose bytes are not the ones the config recorded (``glb.skin_sha256``)
     notes : what the pipeline did that the user should hear about (rest frames, stretches found)
     manifest : the manifest as written (None when the BVH went to a stream)
     result : the pipeline's result (positions, hierarchy, figures)
@@ -126,7 +131,8 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
     The resolved pipeline (whatever preset, file or flags it came from), the
     output options, the skin's and edited paths' bytes, the joint map, and the tool's version.
     The manifest records it as ``parameters``; ``batch --resume`` redoes a clip
-    whose manifest names other parameters.
+    whose manifest names other parameters. The config's ``[glb]`` block counts as the
+    options given here (what the job used): where the skin file is does not matter, its content does.
     """
     def skin_content(value) -> str | None:  # what the skin is, whichever file (or object) it came from
         if value is None:
@@ -141,7 +147,8 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
 
     from .. import __version__
 
-    fields = {"version": __version__, "preset": preset, "config": config.to_dict(), "glb": bool(glb),
+    pipeline = {block: table for block, table in config.to_dict().items() if block != "glb"}
+    fields = {"version": __version__, "preset": preset, "config": pipeline, "glb": bool(glb),
               "units": units, "influences": int(influences), "skin": skin_content(skin),
               "path_file": file_digest(Path(path_file).read_bytes()) if path_file is not None else None}
     if joint_map is not None:  # only when given: digests of runs without one stay what they were
@@ -152,18 +159,22 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
 
 
 def check_targets(targets: dict[str, Path], inputs: list[Path], overwrite: bool) -> None:
-    """Refuse, before anything runs, targets that are an input, a folder, taken, or named twice."""
+    """Refuse, before anything runs, targets that are an input, a folder, named twice, or taken.
+
+    Taken comes last: what ``--overwrite`` would not cure is said first.
+    """
     for kind, path in targets.items():
         for given in inputs:
             if path.exists() and same_file(path, given) or path.resolve() == given.resolve():
                 raise ConfigError(f"{path}: would overwrite the input {given}; choose another output folder or name")
         if path.is_dir():
             raise ConfigError(f"{path}: is a folder, so the {kind} output cannot be written there")
-        if path.exists() and not overwrite:
-            raise OutputExistsError(path)
     names = [p.resolve() for p in targets.values()]
     if len(set(names)) != len(names):
         raise ConfigError("two outputs would be written to the same file")
+    for path in targets.values():
+        if path.exists() and not overwrite:
+            raise OutputExistsError(path)
 
 
 def convert(
@@ -175,17 +186,24 @@ def convert(
     name: str | None = None,
     label: str | None = None,
     overwrite: bool = False,
-    glb: bool = True,
+    glb: bool | None = None,
     skin: Skin | str | os.PathLike | None = None,
     joint_map: dict[str, str] | str | os.PathLike | None = None,
-    units: str = "auto",
-    influences: int = 4,
+    units: str | None = None,
+    influences: int | None = None,
     trails: str | os.PathLike | None = None,
     path_file: str | os.PathLike | None = None,
     protect: tuple[str | os.PathLike, ...] = (),
     parameters: str | None = None,
 ) -> JobRecord:
     """Exaggerate one clip and write its output set.
+
+    ``glb``, ``skin``, ``joint_map``, ``units`` and ``influences`` left out (None) are the
+    config's ``[glb]`` block's; given, they win over it. The pipeline file written records
+    what was used (`recorded_config`): file paths relative to the output folder, with their
+    SHA-256 (a `Skin` or a joint map given as a dict cannot be named there: a note says so).
+    A skin or joint map taken from the config whose bytes are not the ones it recorded is
+    used, with a warning.
 
     Parameters
     ----------
@@ -223,6 +241,15 @@ def convert(
     started = time.perf_counter()
     if config is None:
         config = load_preset(preset or DEFAULT_PRESET)
+    settings = config.glb
+    glb = settings.enabled if glb is None else glb
+    units = settings.units if units is None else units
+    influences = settings.influences if influences is None else influences
+    if skin is None and settings.skin:
+        skin = settings.skin
+    if joint_map is None and settings.joint_map:
+        joint_map = settings.joint_map
+    skin_file, map_file = (Path(p) if isinstance(p, (str, os.PathLike)) else None for p in (skin, joint_map))
     to_stream = hasattr(output, "write")
     inputs = [Path(p) for p in (source, path_file, skin, joint_map, *protect) if isinstance(p, (str, os.PathLike))
               and str(p) != "-"]
@@ -260,6 +287,9 @@ def convert(
         skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
     elif joint_map:
         raise ConfigError("a joint map pairs the clip's joints with a skin's: give the skin too (--skin)")
+    recorded = None if to_stream else recorded_config(
+        config, Path(output), glb=glb, units=units, influences=influences, skin=skin_file, joint_map=map_file)
+    changed = [] if recorded is None else _changed_since_recorded(settings, recorded.glb, skin_file, map_file)
     check_targets({**targets, **{f"old {p.suffix}": p for p in retired}}, inputs, overwrite)
     if parameters is None and not to_stream:
         parameters = parameters_digest(config, preset=preset, glb=glb, units=units, influences=influences, skin=skin,
@@ -269,14 +299,12 @@ def convert(
     motion, report = read_bvh(data, name=label, fps=config.input.fps, root_offset=config.input.root_offset,
                               up=config.input.up)
     timings["read"] = time.perf_counter() - started
+    warnings = list(report.warnings) + changed
     binding = None
     if skin is not None and glb and not to_stream:  # bound before the run: a skin that will not bind costs nothing
-        from ..rig.binding import bind_skin
+        from ..rig.binding import bind_skin_to_clip
 
-        try:
-            skin, binding = bind_skin(skin, motion.skeleton, joint_map)
-        except ConfigError as error:
-            raise ConfigError(f"{skin_label}: {error} (clip {label})") from None
+        skin, binding = bind_skin_to_clip(skin, motion.skeleton, joint_map, skin_label=skin_label, clip_label=label)
     result = run(motion, config, paths=paths)
     timings.update(result.timings)
     for target in targets.values():
@@ -309,7 +337,7 @@ def convert(
             outputs["weights"] = written.add(targets["weights"], weights)
             del glb_pieces, weights
         if not to_stream:
-            outputs["pipeline"] = written.add(targets["pipeline"], config.to_toml().encode("utf-8"))
+            outputs["pipeline"] = written.add(targets["pipeline"], recorded.to_toml(preset=preset).encode("utf-8"))
         if trails is not None:
             from ..io.trails import format_trails
 
@@ -325,8 +353,8 @@ def convert(
                 listed["units"] = units_used
             listed["hashes"] = outputs.copy()
             timings["total"] = time.perf_counter() - started
-            info = manifest(input_name=label, input_hash=input_hash, config=config, preset=preset, result=result,
-                            outputs=listed, reader_warnings=report.warnings, frames_in=motion.num_frames,
+            info = manifest(input_name=label, input_hash=input_hash, config=recorded, preset=preset, result=result,
+                            outputs=listed, reader_warnings=warnings, frames_in=motion.num_frames,
                             fps=motion.fps, timings=timings)
             info["parameters"] = parameters
             if binding is not None:
@@ -341,12 +369,79 @@ def convert(
         max_link_stretch=result.max_link_stretch,
         seconds=time.perf_counter() - started,
         timings=timings,
-        warnings=list(report.warnings),
-        notes=list(result.notes),
+        warnings=warnings,
+        notes=list(result.notes) + _unnamed(skin, skin_file, joint_map, map_file, to_stream),
         manifest=info,
         result=result,
         captured=motion,
     )
+
+
+def recorded_config(config: PipelineConfig, folder: str | os.PathLike, *, glb: bool, units: str, influences: int,
+                    skin: str | os.PathLike | None = None, joint_map: str | os.PathLike | None = None) -> PipelineConfig:
+    """``config`` with its ``[glb]`` block as a job in ``folder`` used it: what ``<name>.pipeline.toml`` holds.
+
+    The skin and joint map files are named relative to ``folder`` (where the pipeline file
+    is written, so it works from any working folder and when the folders move together;
+    absolute when on another drive), each with its SHA-256. Without a skin file the joint
+    map is not named either (it pairs with a skin the file cannot name).
+    """
+    folder = Path(folder)
+    skin_path, skin_sha = _named(skin, folder)
+    map_path, map_sha = _named(joint_map, folder) if skin_path else ("", "")
+    return replace(config, glb=GlbConfig(enabled=bool(glb), units=units, influences=int(influences), skin=skin_path,
+                                         skin_sha256=skin_sha, joint_map=map_path, joint_map_sha256=map_sha))
+
+
+def _named(path: str | os.PathLike | None, folder: Path) -> tuple[str, str]:
+    """A file as a pipeline file in ``folder`` names it, and its SHA-256 (hex); empty strings for None."""
+    if path is None:
+        return "", ""
+    target = Path(path).resolve()
+    try:
+        shown = Path(os.path.relpath(target, folder.resolve())).as_posix()
+    except ValueError:  # another drive: no relative path leads there
+        shown = target.as_posix()
+    return shown, _sha256(target)
+
+
+def _sha256(path: Path) -> str:
+    try:
+        with open(path, "rb") as stream:
+            return hashlib.file_digest(stream, "sha256").hexdigest()
+    except OSError as error:
+        raise InputError(f"cannot read ({error.strerror or error})", source=str(path)) from None
+
+
+def _changed_since_recorded(settings: GlbConfig, now: GlbConfig, skin: Path | None,
+                            joint_map: Path | None) -> list[str]:
+    """Warnings for the config's skin and joint map files whose bytes (``now``) are not the ones it recorded.
+
+    Only where the file used is the one the config names: a skin given instead is another file,
+    and its recorded hash says nothing about it.
+    """
+    warnings = []
+    for key, used, named, recorded, actual in (
+            ("skin", skin, settings.skin, settings.skin_sha256, now.skin_sha256),
+            ("joint_map", joint_map, settings.joint_map, settings.joint_map_sha256, now.joint_map_sha256)):
+        if not recorded or not actual or used is None or used.resolve() != Path(named).resolve():
+            continue
+        if actual != recorded:
+            warnings.append(f"glb.{key} {used} is not the file the pipeline file recorded (SHA-256 {actual[:12]}..., "
+                            f"recorded {recorded[:12]}...): the GLB and weights may differ from the ones it made")
+    return warnings
+
+
+def _unnamed(skin, skin_file, joint_map, map_file, to_stream: bool) -> list[str]:
+    """Notes for a skin or joint map the pipeline file cannot name (given as objects, not files)."""
+    if to_stream:
+        return []
+    notes = []
+    if skin is not None and skin_file is None:
+        notes.append("the skin was given as a Skin, not a file: the pipeline file names no skin (glb.skin)")
+    if joint_map and map_file is None:
+        notes.append("the joint map was given as pairs, not a file: the pipeline file names none (glb.joint_map)")
+    return notes
 
 
 def check_output_set(manifest: str | os.PathLike) -> list[str]:

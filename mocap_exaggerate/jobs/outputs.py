@@ -46,6 +46,8 @@ def manifest(
 ) -> dict[str, Any]:
     """The JSON manifest that records how an output was made.
 
+    ``config`` is the declaration as the run's pipeline file holds it (`mocap_exaggerate.jobs.job.recorded_config`:
+    the ``[glb]`` block as used, its files named relative to the output folder).
     Timings are the only part that varies between identical runs; they are
     kept apart under ``timings`` so a comparison can ignore them.
     """

@@ -1,0 +1,73 @@
+"""``mocap-exaggerate info``: what a clip holds (joints, channels, frames, limbs, contacts)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from .app import cli, fail_cleanly, verbosity_options
+from .options import FilePath
+
+
+@cli.command()
+@click.argument("input_path", metavar="IN.bvh", type=FilePath(path_type=Path, allow_dash=True))
+@click.option("--limbs", is_flag=True, help="Also list the limbs found (base to end effector).")
+@click.option("--groups", is_flag=True, help="Also list the rubber-joint groups and the joints that ride rigidly.")
+@click.option("--contacts", is_flag=True, help="Also list where the end effectors touch the ground (frames).")
+@click.option("--fps", type=float, default=None, help="Frame rate overriding the file's Frame Time.")
+@click.option("--root-offset", "root_offset", type=click.Choice(["auto", "replace", "add"]), default="auto",
+              show_default=True, help="Position channels replace the joint's OFFSET or add to it (iClone, MakeHuman).")
+@click.option("--up", type=click.Choice(["auto", "x", "y", "z"]), default="auto", show_default=True,
+              help="The axis the body stands along.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
+@verbosity_options
+@fail_cleanly
+def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float | None, root_offset: str, up: str,
+         as_json: bool) -> None:
+    """Describe a clip: joints, channels, rotation orders, frames, fps, duration, height.
+
+    \b
+    Example:
+      mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs --groups --contacts
+    """
+    from mocap_exaggerate.jobs.job import describe
+
+    label = "<stdin>" if str(input_path) == "-" else str(input_path)
+    data = describe(input_path, fps=fps, limbs=limbs, groups=groups, contacts=contacts, label=label,
+                    root_offset=root_offset, up=up)
+    orders = data["rotation_orders"]
+    if as_json:
+        click.echo(json.dumps(data, indent=2))
+        return
+    click.echo(f"{label}")
+    click.echo(f"  joints      {data['joints']} (+{data['end_sites']} End Sites), root {data['root']}")
+    added = " (added to the OFFSET: --root-offset add)" if data["root_offset"] == "add" else ""
+    click.echo(f"  channels    {data['channels']}; position channels on "
+               f"{', '.join(data['position_channel_joints'][:6]) or 'none'}"
+               f"{' ...' if len(data['position_channel_joints']) > 6 else ''}{added}")
+    click.echo(f"  rotation    {', '.join(f'{o} x{n}' for o, n in orders.items())}")
+    click.echo(f"  frames      {data['frames']} at {data['fps']:g} fps ({data['duration_s']:.3f} s)")
+    click.echo(f"  height      {data['height']:g} units along {data['up_axis']} (rest pose)")
+    if data["rest_frames"]:
+        click.echo(f"  rest pose   {data['rest_frames']} leading synthetic frame(s) (see --tpose)")
+    for warning in data["warnings"]:
+        click.echo(f"  warning     {warning}")
+    if limbs:
+        for name, chain in data["limbs"].items():
+            click.echo(f"  {name:<11} {' > '.join(chain)}")
+    if contacts:
+        floor = data["contacts"]["floor"]
+        click.echo(f"  floor       {floor['height']:g} along {floor['up']}{floor['axis']} (the lowest any joint goes)")
+        for joint, runs in data["contacts"]["contacts"].items():
+            spans = ", ".join(f"{a}-{b}" for a, b in runs) or "none"
+            click.echo(f"  contact     {joint}: {spans}")
+    if groups:
+        click.echo(f"  sub-joints  {data['subjoints']} with the default 4 sub-links per link")
+        for chain in data["groups"]:
+            click.echo(f"  group       {chain[0]} | {' > '.join(chain[1:])}")
+        rigid = data["rigid"]
+        if rigid:
+            shown = ", ".join(rigid[:8]) + (f", ... ({len(rigid)} in all)" if len(rigid) > 8 else "")
+            click.echo(f"  rigid       {shown}")

@@ -1,0 +1,56 @@
+"""``mocap-exaggerate preview``: the body captured and exaggerated, as still frames or an animation."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from .app import cli, fail_cleanly, quiet, verbosity_options
+from .options import FilePath, config_from_options, joint_map_of, pipeline_options
+
+
+@cli.command()
+@click.argument("input_path", metavar="IN.bvh", type=FilePath(path_type=Path, allow_dash=True))
+@click.option("-o", "--output", required=True, type=FilePath(path_type=Path),
+              help="File to write: .png (still frames), .gif (looping animation) or .mp4 (needs ffmpeg).")
+@click.option("--frames", "count", type=click.IntRange(1, 12), default=5, show_default=True,
+              help="How many evenly spaced frames a .png shows.")
+@click.option("--trajectory", metavar="JOINT", default=None,
+              help="Draw this joint's captured, averaged and exaggerated paths instead (a .png).")
+@click.option("--start", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="SECONDS",
+              help="Show the motion from this many seconds in.")
+@click.option("--seconds", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="SECONDS",
+              help="Show this many seconds [default: all; an animation stops at 10].")
+@click.option("--overwrite", is_flag=True, help="Replace the file if it exists.")
+@click.option("--skin", "skin_path", type=FilePath(dir_okay=False, path_type=Path), default=None,
+              help="Draw your character (as 'exaggerate --skin' takes it) instead of the default rubber body.")
+@click.option("--joint-map", "joint_map_path", type=FilePath(dir_okay=False, path_type=Path), default=None,
+              help="With --skin: 'clip joint = skin joint' lines for joints the pairing misses.")
+@pipeline_options
+@verbosity_options
+@fail_cleanly
+def preview(input_path: Path, output: Path, count: int, trajectory: str | None, start: float, seconds: float | None,
+            overwrite: bool, skin_path: Path | None, joint_map_path: Path | None, **options) -> None:
+    """Render the skinned body captured and exaggerated (no GPU, no display).
+
+    A .png shows still frames, captured above and exaggerated below; a .gif or .mp4 plays
+    them side by side at the clip's speed, looping; --trajectory draws one joint's paths.
+
+    \b
+    Examples:
+      mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o run.png --preset looney
+      mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o run.gif
+      mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o foot.png --trajectory lFoot
+    """
+    from mocap_exaggerate.viz.preview import write_preview
+
+    # The character drawn is the config's too (a run's pipeline file names the one it used).
+    _, config = config_from_options({**options, "skin_path": skin_path, "joint_map_path": joint_map_path})
+    from_stdin = str(input_path) == "-"
+    write_preview(sys.stdin.buffer if from_stdin else input_path, output, config, frames=count, overwrite=overwrite,
+                  label="<stdin>" if from_stdin else None, trajectory=trajectory, start=start, seconds=seconds,
+                  skin=config.glb.skin or None, joint_map=joint_map_of(config))
+    if not quiet():
+        click.echo(f"wrote {output}", err=True)
