@@ -99,11 +99,7 @@ def test_a_worker_killed_mid_clip_fails_that_clip_alone(tmp_path):
     os.kill(writer_of("long", process.pid, process), signal.SIGKILL)
     stdout, stderr = process.communicate(timeout=300)
 
-    assert process.returncode == 1, stderr
-    lines = stderr.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in stderr, stderr
-    assert lines[0].startswith(f"failed: {folder / 'long.bvh'}: its worker process died"), lines[0]
-    statuses = {Path(json.loads(line)["input"]).stem: json.loads(line)["status"] for line in stdout.splitlines()}
+    statuses = _one_failure(process, stdout, stderr, f"failed: {folder / 'long.bvh'}: its worker process died")
     assert statuses == {"long": "failed", "other": "converted", RUN.stem: "converted", SIT.stem: "converted",
                         JUMP.stem: "converted"}
     # The others' outputs whole; of the killed clip's, nothing: not even the temporaries it was writing.
@@ -160,11 +156,7 @@ def test_a_dask_worker_lost_mid_clip_fails_that_clip_and_the_rest_go_on(tmp_path
         os.kill(writer_of("long", os.getpid(), process), signal.SIGKILL)  # the cluster's workers run under this test
         stdout, stderr = process.communicate(timeout=300)
 
-    assert process.returncode == 1, stderr
-    lines = stderr.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in stderr, stderr
-    assert lines[0].startswith(f"failed: {folder / 'long.bvh'}: its Dask task failed: KilledWorker"), lines[0]
-    statuses = {Path(json.loads(line)["input"]).stem: json.loads(line)["status"] for line in stdout.splitlines()}
+    statuses = _one_failure(process, stdout, stderr, f"failed: {folder / 'long.bvh'}: its Dask task failed: KilledWorker")
     assert statuses == {"long": "failed", RUN.stem: "converted"}
     assert files_under(out) == expected_outputs(RUN.stem)
 
@@ -192,3 +184,12 @@ def test_a_report_picture_that_cannot_be_drawn_is_a_warning_and_the_report_is_wr
     assert page.count("no pictures") == 1 and page.count('class="preview"') == 1  # jump's are drawn, run's said missing
     assert (out / "report" / "jump.preview.png").is_file()
     assert check_output_set(out / "walks" / "run.json") == []
+
+
+def _one_failure(process, stdout: str, stderr: str, said: str) -> dict[str, str]:
+    """Exit 1 with one line on stderr starting with ``said``, no traceback; each clip's status by its stem."""
+    assert process.returncode == 1, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in stderr, stderr
+    assert lines[0].startswith(said), lines[0]
+    return {Path(json.loads(line)["input"]).stem: json.loads(line)["status"] for line in stdout.splitlines()}
