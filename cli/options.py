@@ -25,7 +25,7 @@ from mocap_exaggerate.config import (
     read_config_text,
     resolve_config,
 )
-from mocap_exaggerate.jobs.batch import DEFAULT_GLOB
+from mocap_exaggerate.jobs.discovery import DEFAULT_GLOB
 from mocap_exaggerate.stages.contacts import parse_target
 from mocap_exaggerate.stages.stretch import parse_stretch
 

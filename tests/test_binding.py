@@ -15,8 +15,7 @@ from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.skin import load_skin
 from mocap_exaggerate.rig.binding import bind_skin, joint_roles, pair_joints, read_joint_map, skin_skeleton
 from mocap_exaggerate.rig.body import default_skin
-from mocap_exaggerate.rig.skinning import Skin
-from mocap_exaggerate.viz.preview import pose_skin
+from mocap_exaggerate.rig.skinning import Skin, pose_skin
 
 from .helpers import ROOT, SAMPLE_DIR, SHARED_BVH, shared
 

@@ -5,7 +5,8 @@ from hypothesis import strategies as st
 
 from mocap_exaggerate.core.timing import spread_max
 from mocap_exaggerate.io.bvh import read_bvh
-from mocap_exaggerate.stages.correct import CorrectConfig, accent_stretch, correct, keep_bends, stretch_error
+from mocap_exaggerate.stages.bends import keep_bends
+from mocap_exaggerate.stages.correct import CorrectConfig, accent_stretch, correct, stretch_error
 from mocap_exaggerate.stages.extrapolate import extrapolate
 
 from .helpers import shared

@@ -300,3 +300,11 @@ def test_gltf_json_is_pygltflibs_text(tmp_path):
     finally:
         gltf_module.gltf_json = gltf_json
     assert len(seen) == len(clips) + 1 and min(seen) > 10_000
+
+
+def test_the_config_names_the_same_units_as_the_glb_writer():
+    # config.py keeps its own list so reading a pipeline file does not import the glTF writer.
+    from mocap_exaggerate.config import GLB_UNITS
+    from mocap_exaggerate.io.gltf import UNITS
+
+    assert GLB_UNITS == ("auto", *UNITS)

@@ -19,11 +19,12 @@ from mocap_exaggerate.core.skeleton import Skeleton
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.jobs.outputs import THICKNESS, base_skin, make_glb, output_skin, output_thickness
 from mocap_exaggerate.pipeline import run
+from mocap_exaggerate.rig.skinning import pose_skin
 from mocap_exaggerate.stages.contacts import ContactConfig
 from mocap_exaggerate.stages.correct import CorrectConfig
 from mocap_exaggerate.stages.extrapolate import ExtrapolateConfig
 from mocap_exaggerate.stages.springs import SpringConfig
-from mocap_exaggerate.viz.preview import pose_bodies, pose_skin
+from mocap_exaggerate.viz.posing import pose_bodies
 
 from .helpers import ROOT, SAMPLE_CLIPS, mesh_pieces, shared
 

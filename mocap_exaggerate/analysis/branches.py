@@ -8,6 +8,7 @@ effector (`incoming_joint`) from the same functions, so the two cannot drift.
 
 from __future__ import annotations
 
+import functools
 import re
 
 import numpy as np
@@ -171,6 +172,10 @@ def incoming_joint(skeleton, joint: int) -> int:
     return first_above_at_distance(skeleton, joint, effective_lengths(skeleton))
 
 
+@functools.lru_cache(maxsize=16)
 def rider_joints(skeleton: Skeleton) -> dict[int, list[int]]:
-    """Joint -> the joints of minor branches riding rigidly on it (toes on a foot, fingers on a hand)."""
+    """Joint -> the joints of minor branches riding rigidly on it (toes on a foot, fingers on a hand).
+
+    Found once per skeleton (three stages ask); the mapping is shared, so read it, do not change it.
+    """
     return riders(skeleton, minor_branches(skeleton))

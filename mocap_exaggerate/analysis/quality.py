@@ -136,12 +136,12 @@ def motion_quality(motion: Motion, result) -> dict:
 def face_stretch(skin, bind: np.ndarray, rotations: np.ndarray, positions: np.ndarray, joint_index: np.ndarray,
                  frames) -> np.ndarray:
     """Per face of ``skin``, its longest edge's largest stretch (posed length over bound length)
-    at ``frames`` (a few: one posed mesh at a time), posed by `mocap_exaggerate.viz.preview.pose_skin`.
+    at ``frames`` (a few: one posed mesh at a time), posed by `mocap_exaggerate.rig.skinning.pose_skin`.
 
     bind : (J, 3) the skeleton's bind positions; rotations, positions : (F, J, ...) world transforms
     joint_index : skeleton index of each of the skin's joints
     """
-    from ..viz.preview import pose_skin
+    from ..rig.skinning import pose_skin
 
     edges = np.concatenate([skin.faces[:, [0, 1]], skin.faces[:, [1, 2]], skin.faces[:, [2, 0]]])
     rest = np.linalg.norm(np.diff(skin.vertices[edges], axis=1)[:, 0], axis=1)

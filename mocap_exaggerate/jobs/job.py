@@ -529,8 +529,8 @@ def clip_contacts(motion, config=None) -> dict[str, Any]:
     ``{"floor": {...}, "contacts": {joint: [[start, end], ...]}}`` with frames counted
     in the file (leading rest-pose frames are not searched).
     """
+    from ..analysis.branches import minor_branches, rubber_groups
     from ..stages.contacts import ContactConfig, find_contacts, find_effectors
-    from ..stages.subjoints import minor_branches, rubber_groups
 
     config = config or ContactConfig()
     skeleton = motion.skeleton

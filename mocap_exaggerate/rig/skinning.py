@@ -21,10 +21,11 @@ from typing import NamedTuple
 import numpy as np
 
 from ..core.errors import ConfigError
+from ..core.rotations import quat_rotate
 from ..core.skeleton import Skeleton
 from ..stages.subjoints import SubjointHierarchy
 
-__all__ = ["Skin", "top_influences", "reweight", "segment_distance", "subjoint_bind_positions"]
+__all__ = ["Skin", "top_influences", "reweight", "segment_distance", "subjoint_bind_positions", "pose_skin"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -406,3 +407,22 @@ def subjoint_bind_positions(skeleton: Skeleton, hierarchy: SubjointHierarchy, bi
     f = hierarchy.fraction[:, None]
     parent = np.where(hierarchy.link_parent < 0, hierarchy.link_child, hierarchy.link_parent)
     return (1 - f) * positions[parent] + f * positions[hierarchy.link_child]
+
+
+def pose_skin(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray,
+              joint_index: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
+    """Linear blend skinning: vertices ``(..., V, 3)`` of ``skin`` posed by world transforms.
+
+    bind : (J, 3) rest (bind) position of each skeleton joint;
+    world_rot : (..., J, 4), world_pos : (..., J, 3), any leading axes (frames) broadcast;
+    joint_index : (len(skin.joint_names),) skeleton index of each skin joint;
+    scale : (..., J) world scale of each joint (the GLB's `mocap_exaggerate.jobs.outputs.output_thickness`) or None.
+    The bind pose has identity orientations (BVH rest), so a vertex moves as
+    ``s_j R_j (v - bind_j) + p_j`` under joint j.
+    """
+    joints = joint_index[skin.joints]  # (V, K)
+    turned = quat_rotate(world_rot[..., joints, :], skin.vertices[:, None, :] - bind[joints])
+    if scale is not None:
+        turned = turned * scale[..., joints, None]
+    moved = turned + world_pos[..., joints, :]
+    return np.sum(skin.weights[..., None] * moved, axis=-2)

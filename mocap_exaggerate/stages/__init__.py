@@ -3,7 +3,6 @@
 `mocap_exaggerate.pipeline` declares the order they run in.
 """
 
-from ..core.timing import gaussian_average, parse_duration
 from .correct import CorrectConfig, CorrectReport, correct, stretch_error
 from .extrapolate import ExtrapolateConfig, extrapolate
 from .orient import motion_from_world, recover_orientations
@@ -20,9 +19,7 @@ __all__ = [
     "build_hierarchy",
     "correct",
     "extrapolate",
-    "gaussian_average",
     "motion_from_world",
-    "parse_duration",
     "position_subjoints",
     "recover_orientations",
     "simulate_springs",

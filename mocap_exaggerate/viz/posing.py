@@ -12,35 +12,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.motion import Motion
-from ..core.rotations import quat_rotate
 from ..jobs.outputs import base_skin, output_skin, output_thickness
 from ..pipeline import PipelineResult
-from ..rig.skinning import Skin
+from ..rig.skinning import Skin, pose_skin
 from .framing import view_axes
 
 __all__ = ["pose_skin", "pose_bodies", "PosedBodies", "shaded_triangles", "CAPTURED_COLOR", "EXAGGERATED_COLOR"]
 
 CAPTURED_COLOR = (0.75, 0.75, 0.78)
 EXAGGERATED_COLOR = (1.0, 0.62, 0.25)
-
-
-def pose_skin(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray,
-              joint_index: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
-    """Linear blend skinning: vertices ``(..., V, 3)`` of ``skin`` posed by world transforms.
-
-    bind : (J, 3) rest (bind) position of each skeleton joint;
-    world_rot : (..., J, 4), world_pos : (..., J, 3), any leading axes (frames) broadcast;
-    joint_index : (len(skin.joint_names),) skeleton index of each skin joint;
-    scale : (..., J) world scale of each joint (the GLB's `mocap_exaggerate.jobs.outputs.output_thickness`) or None.
-    The bind pose has identity orientations (BVH rest), so a vertex moves as
-    ``s_j R_j (v - bind_j) + p_j`` under joint j.
-    """
-    joints = joint_index[skin.joints]  # (V, K)
-    turned = quat_rotate(world_rot[..., joints, :], skin.vertices[:, None, :] - bind[joints])
-    if scale is not None:
-        turned = turned * scale[..., joints, None]
-    moved = turned + world_pos[..., joints, :]
-    return np.sum(skin.weights[..., None] * moved, axis=-2)
 
 
 def _pose_frames(skin: Skin, bind: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray,
