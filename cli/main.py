@@ -11,9 +11,8 @@ import sys
 
 from . import batch, exaggerate, info, plan, presets, preview  # noqa: F401  (each registers its command)
 from .app import cli
-from .options import FLAG_KEYS
 
-__all__ = ["cli", "main", "FLAG_KEYS"]
+__all__ = ["cli", "main"]
 
 
 def main() -> None:

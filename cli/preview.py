@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from .app import cli, fail_cleanly, quiet, verbosity_options
-from .options import FilePath, config_from_options, joint_map_of, pipeline_options
+from .options import FilePath, character_options, config_from_options, joint_map_of, pipeline_options
 
 
 @cli.command()
@@ -24,15 +24,12 @@ from .options import FilePath, config_from_options, joint_map_of, pipeline_optio
 @click.option("--seconds", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="SECONDS",
               help="Show this many seconds [default: all; an animation stops at 10].")
 @click.option("--overwrite", is_flag=True, help="Replace the file if it exists.")
-@click.option("--skin", "skin_path", type=FilePath(dir_okay=False, path_type=Path), default=None,
-              help="Draw your character (as 'exaggerate --skin' takes it) instead of the default rubber body.")
-@click.option("--joint-map", "joint_map_path", type=FilePath(dir_okay=False, path_type=Path), default=None,
-              help="With --skin: 'clip joint = skin joint' lines for joints the pairing misses.")
+@character_options
 @pipeline_options
 @verbosity_options
 @fail_cleanly
 def preview(input_path: Path, output: Path, count: int, trajectory: str | None, start: float, seconds: float | None,
-            overwrite: bool, skin_path: Path | None, joint_map_path: Path | None, **options) -> None:
+            overwrite: bool, **options) -> None:
     """Render the skinned body captured and exaggerated (no GPU, no display).
 
     A .png shows still frames, captured above and exaggerated below; a .gif or .mp4 plays
@@ -47,7 +44,7 @@ def preview(input_path: Path, output: Path, count: int, trajectory: str | None, 
     from mocap_exaggerate.viz.preview import write_preview
 
     # The character drawn is the config's too (a run's pipeline file names the one it used).
-    _, config = config_from_options({**options, "skin_path": skin_path, "joint_map_path": joint_map_path})
+    _, config = config_from_options(options)
     from_stdin = str(input_path) == "-"
     write_preview(sys.stdin.buffer if from_stdin else input_path, output, config, frames=count, overwrite=overwrite,
                   label="<stdin>" if from_stdin else None, trajectory=trajectory, start=start, seconds=seconds,

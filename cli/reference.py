@@ -4,8 +4,8 @@
 
 `tests/test_docs.py` checks the committed pages equal what this prints, so the reference
 never drifts from the code. The settings page reads each block's dataclass (its fields,
-defaults and the docstring lines that describe them), the shipped presets, and which flag
-sets each key, from the command line's own table of them (`options.FLAG_KEYS`).
+defaults and the docstring lines that describe them), the shipped presets, and the flag
+each setting declares (`mocap_exaggerate.core.settings.Flag`).
 """
 
 from __future__ import annotations
@@ -19,9 +19,10 @@ from typing import Any
 import click
 
 from mocap_exaggerate.config import PipelineConfig, load_preset, preset_names
+from mocap_exaggerate.core.settings import flagged_settings
 
 from .main import cli
-from .options import FLAG_KEYS
+from .options import setting_param
 
 __all__ = ["cli_reference", "config_reference", "write_reference"]
 
@@ -89,10 +90,11 @@ def _field_docs(cls: type) -> dict[str, str]:
 
 
 def _flags() -> dict[str, str]:
-    """Setting key -> the flag that sets it, from the command line's own table (`options.FLAG_KEYS`)."""
+    """Setting key -> the flag that sets it, as ``exaggerate`` has it (the setting declares it)."""
     command = cli.get_command(click.Context(cli), "exaggerate")
     options = {p.name: "/".join(p.opts + p.secondary_opts) for p in command.params if isinstance(p, click.Option)}
-    return {f"{block}.{key}": options[name] for name, block, key, _ in FLAG_KEYS}
+    return {f"{block}.{key}": options[setting_param(block, key)] for block, key, _ in flagged_settings(PipelineConfig)
+            if block}
 
 
 def _toml(value: Any) -> str:

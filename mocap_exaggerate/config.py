@@ -13,18 +13,19 @@ import copy
 import os
 import re
 import tomllib
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from .core.errors import ConfigError, check_choice, check_flag, check_number
-from .io.bvh import FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES, check_bvh_positions
-from .stages.contacts import ContactConfig, TargetSpec
+from .core.settings import Flag, setting
+from .io.bvh import BVH_POSITIONS, FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES, check_bvh_positions
+from .stages.contacts import ContactConfig, TargetSpec, parse_target
 from .stages.correct import CorrectConfig
 from .stages.extrapolate import ExtrapolateConfig
 from .stages.springs import SpringConfig
-from .stages.stretch import AutoStretchConfig, StretchSpec
+from .stages.stretch import AutoStretchConfig, StretchSpec, parse_stretch
 from .stages.subjoints import SubjointConfig
 
 __all__ = [
@@ -61,10 +62,15 @@ class InputConfig:
     up : the axis the body stands along, ``x``, ``y``, ``z``, or ``auto`` (from the rest pose).
     """
 
-    tpose: str = "auto"
-    fps: float | None = None
-    root_offset: str = "auto"
-    up: str = "auto"
+    tpose: str = setting("auto", flag=Flag(
+        "--tpose", "Leading synthetic rest pose: auto (keep out of filters, unchanged), keep, drop.",
+        choices=_TPOSE_MODES))
+    fps: float | None = setting(None, flag=Flag("--fps", "Frame rate overriding the file's Frame Time."))
+    root_offset: str = setting("auto", flag=Flag(
+        "--root-offset", "Position channels replace the joint's OFFSET (most exporters) or add to it "
+        "(Reallusion/iClone, MakeHuman); auto tells them apart. Default auto.", choices=ROOT_OFFSET_MODES))
+    up: str = setting("auto", flag=Flag(
+        "--up", "The axis the body stands along; auto: from the rest pose. Default auto.", choices=UP_AXES))
 
     def __post_init__(self) -> None:
         check_choice("input.tpose", self.tpose, _TPOSE_MODES)
@@ -92,9 +98,16 @@ class OutputConfig:
         (`mocap_exaggerate.jobs.outputs.output_thickness`); off keeps every bone its own thickness.
     """
 
-    skeleton: str = "sub"
-    bvh_positions: str = "standard"
-    preserve_volume: bool = True
+    skeleton: str = setting("sub", flag=Flag(
+        "--skeleton", "Write the rubber sub-joint skeleton (sub) or the original joints only (original).",
+        choices=_SKELETON_MODES))
+    bvh_positions: str = setting("standard", flag=Flag(
+        "--bvh-positions", "BVH position channels: standard (each joint's translation, replacing its OFFSET: what "
+        "Blender, bvhio and MotionBuilder read) or input (the input's own convention: added to the OFFSETs for "
+        "iClone and MakeHuman clips, for re-import into iClone). Default standard.", choices=BVH_POSITIONS))
+    preserve_volume: bool = setting(True, flag=Flag(
+        "--preserve-volume/--no-preserve-volume", "GLB: a stretched bone gets thinner and a squashed one fatter, "
+        "keeping its volume (1/sqrt of the stretch). Default on."))
 
     def __post_init__(self) -> None:
         check_choice("output.skeleton", self.skeleton, _SKELETON_MODES)
@@ -129,12 +142,21 @@ class GlbConfig:
     joint_map_sha256 : the joint map file's SHA-256, checked as ``skin_sha256``
     """
 
-    enabled: bool = True
-    units: str = "auto"
-    influences: int = 4
-    skin: str = ""
+    enabled: bool = setting(True, flag=Flag(
+        "--glb/--no-glb", "Also write OUT/<name>.glb (skinned, animated) and OUT/<name>.weights.npz. [default: glb]"))
+    units: str = setting("auto", flag=Flag(
+        "--units", f"BVH units for the GLB (metres): {', '.join(GLB_UNITS)}. [default: auto]", metavar="UNITS"))
+    influences: int = setting(4, flag=Flag(
+        "--influences", "Joints per vertex in the GLB: 4 (JOINTS_0) or 8 (a second JOINTS_1/WEIGHTS_1 set). "
+        "[default: 4]", choices={str(n): n for n in _INFLUENCES}))
+    skin: str = setting("", flag=Flag(
+        "--skin", "Your character: a skinned .glb/.gltf, a MakeHuman .obj (+ .mhw, .mhskel beside it) or an .npz "
+        "bound to the clip's joints. Made for another rig, it is fitted to the clip (joints paired by role and "
+        "name). Default: a rubber body grown from the skeleton.", path=True))
     skin_sha256: str = ""
-    joint_map: str = ""
+    joint_map: str = setting("", flag=Flag(
+        "--joint-map", "With --skin: a text file of 'clip joint = skin joint' lines, for joints the automatic "
+        "pairing misses or gets wrong.", path=True))
     joint_map_sha256: str = ""
 
     def __post_init__(self) -> None:
@@ -180,8 +202,15 @@ class PipelineConfig:
     glb: GlbConfig = field(default_factory=GlbConfig)
     auto_stretch: AutoStretchConfig = field(default_factory=AutoStretchConfig)
     contacts: ContactConfig = field(default_factory=ContactConfig)
-    stretch: tuple[StretchSpec, ...] = ()
-    target: tuple[TargetSpec, ...] = ()
+    stretch: tuple[StretchSpec, ...] = setting((), flag=Flag(
+        "--stretch", "Squash/stretch a limb along its path: LIMB:START-END:SCALE[:axes=xz][:pivot=end]"
+        "[:ease_in=0.6,0.2][:ease_out=0.3,0.8][:blend=1][:release=0.1s]; frames or 1.2s. "
+        "Repeatable; adds to the config's [[stretch]] list.", metavar="SPEC", parse=parse_stretch, multiple=True,
+        adds=True))
+    target: tuple[TargetSpec, ...] = setting((), flag=Flag(
+        "--target", "Hold an end effector (a joint, or a limb: right_arm) where it was captured at FRAME (or at "
+        "X,Y,Z), eased in and out over 0.25 s. Frames or 1.2s. Repeatable.", metavar="JOINT@FRAME[=X,Y,Z]",
+        parse=parse_target, multiple=True, adds=True))
     limbs: tuple[tuple[str, tuple[str, ...]], ...] = ()
     description: str = ""
 
@@ -216,19 +245,10 @@ class PipelineConfig:
                 raise ConfigError(f"{source}: [{key}] must be a table")
             block_type = _BLOCKS[key]
             known = {f.name for f in fields(block_type)}
-            values = {}
-            for name, item in value.items():
+            for name in value:
                 if name not in known:
                     raise ConfigError(f"{source}: unknown key {key}.{name} (known: {', '.join(sorted(known))})")
-                values[name] = item
-            if key == "extrapolate" and "weights" in values:
-                values["weights"] = _weights_from_table(values["weights"], source)
-            for integer in ("max_iter", "per_link", "influences"):
-                if isinstance(values.get(integer), float) and values[integer].is_integer():
-                    values[integer] = int(values[integer])
-            for listed in ("groups", "rigid", "joints"):
-                if listed in values and not isinstance(values[listed], (list, tuple)):
-                    raise ConfigError(f"{source}: {key}.{listed} must be a list")
+            values = _values_from_toml(block_type, key, value, source)
             try:
                 blocks[key] = block_type(**values)
             except ConfigError as error:
@@ -246,15 +266,7 @@ class PipelineConfig:
         if self.description:
             out["description"] = self.description
         for name in _BLOCKS:
-            table = asdict(getattr(self, name))
-            if name == "extrapolate":
-                table["weights"] = {pattern: float(w) for pattern, w in self.extrapolate.weights}
-            if name == "subjoints":
-                table["groups"] = [list(g) for g in self.subjoints.groups]
-                table["rigid"] = list(self.subjoints.rigid)
-            if name == "contacts":
-                table["joints"] = list(self.contacts.joints)
-            out[name] = {k: v for k, v in table.items() if v is not None}
+            out[name] = _values_to_toml(getattr(self, name))
         if self.limbs:
             out["limbs"] = {name: list(chain) for name, chain in self.limbs}
         if self.stretch:
@@ -280,6 +292,45 @@ class PipelineConfig:
 
         table = self.to_dict()
         return tomli_w.dumps({"preset": preset, **table} if preset else table)
+
+
+def _values_to_toml(block: Any) -> dict[str, Any]:
+    """A block's settings as TOML values: tuples as arrays, a `setting` declared as a table
+    (``extrapolate.weights``) as one, None left out."""
+    out = {}
+    for item in fields(block):
+        value = getattr(block, item.name)
+        if value is None:
+            continue
+        if item.metadata.get("table"):
+            value = {str(name): float(number) for name, number in value}
+        out[item.name] = _lists(value)
+    return out
+
+
+def _lists(value: Any) -> Any:
+    return [_lists(v) for v in value] if isinstance(value, (tuple, list)) else value
+
+
+def _values_from_toml(block_type: type, key: str, table: dict[str, Any], source: str) -> dict[str, Any]:
+    """A block's TOML values as its fields take them, by each field's declared type: a table
+    for a `setting` declared as one, a list where the type is a tuple, a whole number where
+    it is an int (TOML's ``2.0`` too)."""
+    import typing
+
+    hints = typing.get_type_hints(block_type)
+    declared = {item.name: item for item in fields(block_type)}
+    values = {}
+    for name, value in table.items():
+        hint = hints[name]
+        if declared[name].metadata.get("table"):
+            value = _pairs_from_table(value, source, f"{key}.{name}")
+        elif typing.get_origin(hint) is tuple and not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{source}: {key}.{name} must be a list")
+        elif hint is int and isinstance(value, float) and value.is_integer():
+            value = int(value)
+        values[name] = value
+    return values
 
 
 def _parse_toml(text: str, source: str) -> dict[str, Any]:
@@ -366,17 +417,18 @@ def _limbs_from_table(table: Any, source: str) -> tuple[tuple[str, tuple[str, ..
     return tuple(out)
 
 
-def _weights_from_table(table: Any, source: str) -> tuple[tuple[str, float], ...]:
+def _pairs_from_table(table: Any, source: str, key: str) -> tuple[tuple[str, float], ...]:
+    """``name = number`` pairs from a TOML table (or a list of pairs: ``--weight`` gives one)."""
     if isinstance(table, dict):
         items = list(table.items())
     elif isinstance(table, (list, tuple)) and all(isinstance(i, (list, tuple)) and len(i) == 2 for i in table):
         items = [tuple(item) for item in table]
     else:
-        raise ConfigError(f"{source}: extrapolate.weights must be a table of name = weight")
+        raise ConfigError(f"{source}: {key} must be a table of name = weight")
     out = []
     for pattern, weight in items:
         if isinstance(weight, bool) or not isinstance(weight, (int, float)):
-            raise ConfigError(f"{source}: extrapolate.weights[{pattern!r}] must be a number, got {weight!r}")
+            raise ConfigError(f"{source}: {key}[{pattern!r}] must be a number, got {weight!r}")
         out.append((str(pattern), float(weight)))
     return tuple(out)
 

@@ -43,6 +43,7 @@ from ..analysis.branches import incoming_joint, rider_joints, rubber_groups
 from ..analysis.limbs import Limb
 from ..core.errors import ConfigError, check_choice, check_flag, check_number
 from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
+from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
 from ..core.timing import check_duration, parse_duration, parse_frame, smootherstep, spread_max
 from .state import Pins
@@ -97,14 +98,20 @@ class ContactConfig:
     floor : keep every joint above the captured floor
     """
 
-    enabled: bool = True
+    enabled: bool = setting(True, flag=Flag(
+        "--contacts", "Feet (or the joints in [contacts]) that touch the ground in the capture stay planted there, "
+        "and no joint goes below the captured floor (auto); off leaves them as exaggerated.",
+        choices={"auto": True, "off": False}))
     joints: tuple[str, ...] = ("feet",)
-    anchor: str = "captured"
+    anchor: str = setting("captured", flag=Flag(
+        "--anchor", "Where a planted foot stays: where it was captured, or where the exaggeration put it when it "
+        "landed (keeps the bigger stride).", choices=_ANCHORS))
     height: float = 0.04
     speed: float = 0.3
     min_duration: str | float = "0.08s"
     blend: str | float = "0.15s"
-    floor: bool = True
+    floor: bool = setting(True, flag=Flag(
+        "--floor/--no-floor", "Keep every joint above the captured floor (with --contacts auto)."))
 
     def __post_init__(self) -> None:
         check_flag("contacts.enabled", self.enabled)

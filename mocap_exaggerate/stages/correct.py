@@ -43,6 +43,7 @@ import numpy as np
 
 from ..analysis.limbs import limb_hinges
 from ..core.errors import ConfigError, check_flag, check_number
+from ..core.settings import Flag, setting
 from ..core.timing import check_duration, parse_duration, smootherstep, spread_max
 from .bends import keep_bends
 
@@ -81,11 +82,13 @@ class CorrectConfig:
         torsos stretch less than limbs). 1 treats them like any link.
     """
 
-    enabled: bool = True
-    threshold: float = 0.05
-    delta: float = 0.5
-    max_stretch: float = 1.0
-    max_iter: int = 500
+    enabled: bool = setting(True, flag=Flag("--correct/--no-correct", "Switch link correction on or off."))
+    threshold: float = setting(0.05, flag=Flag(
+        "--threshold", "Correction: summed stretch allowed per frame, as a fraction of total link length."))
+    delta: float = setting(0.5, flag=Flag("--delta", "Correction: share of excess removed per iteration, (0, 1]."))
+    max_stretch: float = setting(1.0, flag=Flag(
+        "--max-stretch", "Correction: stretch up to this factor of a link's length is free."))
+    max_iter: int = setting(500, flag=Flag("--max-iter", "Correction: iteration bound."))
     smooth: str | float = "0.1s"
     accent_speed: float = 0.0
     torso: float = 1.0

@@ -38,7 +38,8 @@ anticipation and settle survive.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+import math
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -46,6 +47,7 @@ import numpy as np
 from ..analysis.branches import rider_joints
 from ..analysis.limbs import LIMB_NAMES, find_limbs, limb_joints, torso_joints
 from ..core.errors import ConfigError, check_flag, check_number
+from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
 from ..core.timing import end_ramp, gaussian_average, parse_duration, smootherstep, spread_max, step_gain
 
@@ -57,6 +59,21 @@ __all__ = ["ExtrapolateConfig", "extrapolate", "extrapolate_stage", "resolve_wei
 #: Widest Gaussian accepted, whatever the clip (a minute; 100,000 frames).
 MAX_SIGMA_SECONDS = 60.0
 MAX_SIGMA_FRAMES = 100_000
+
+
+def parse_weight(text: str) -> tuple[str, float]:
+    """One ``NAME=W`` pair of ``--weight``: a joint, pattern or limb and a weight from 0 to 10."""
+    shown = repr(text) if len(text) <= 80 else repr(text[:80]) + f"... ({len(text)} characters)"
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip():
+        raise ConfigError(f"{shown} is not NAME=WEIGHT (e.g. LeftArm=2, left_leg=0.5, 'Left*'=0)")
+    try:
+        weight = float(value)
+    except ValueError:
+        raise ConfigError(f"{shown}: weight {value[:80]!r} is not a number") from None
+    if not math.isfinite(weight) or not 0 <= weight <= 10:
+        raise ConfigError(f"{shown}: weight must be between 0 and 10")
+    return key.strip(), weight
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -86,14 +103,18 @@ class ExtrapolateConfig:
         Later pairs win.
     """
 
-    enabled: bool = True
-    sigma: str | float = "0.2s"
-    omega: float = 5.0
+    enabled: bool = setting(True, flag=Flag("--extrapolate/--no-extrapolate", "Switch trajectory extrapolation on or off."))
+    sigma: str | float = setting("0.2s", flag=Flag(
+        "--sigma", "Width of the Gaussian average: 0.2s, 200ms or 18f (frames).", metavar="DURATION"))
+    omega: float = setting(5.0, flag=Flag("--omega", "Extrapolation factor: 1 = as captured, 5 = the paper's, <1 calms."))
     smooth: str | float = "0.05s"
     max_speed: float = 2.0
     still: float = 0.05
     torso: float = 1.0
-    weights: tuple[tuple[str, float], ...] = field(default=())
+    weights: tuple[tuple[str, float], ...] = setting((), flag=Flag(
+        "--weight", "Per-joint exaggeration weight; NAME is a joint, a pattern (Left*) or a limb (left_arm, "
+        "right_leg, spine, neck). Repeatable; 0 keeps it as captured.",
+        metavar="NAME=W", parse=parse_weight, multiple=True), table=True)
 
     def __post_init__(self) -> None:
         check_flag("extrapolate.enabled", self.enabled)

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..analysis.limbs import limb_hinges, limb_joints
 from ..core.errors import ConfigError, check_flag, check_number
+from ..core.settings import Flag, setting
 from ..core.timing import smootherstep
 from .bends import keep_bends_on_rubber
 from .subjoints import even_out
@@ -55,11 +56,14 @@ class SpringConfig:
     blend : share of the suspended particles in the output; 0 is the identity
     """
 
-    enabled: bool = True
-    stiffness: float = 150.0
-    link_stiffness: float = 150.0
-    damping: float = 8.0
-    blend: float = 0.5
+    enabled: bool = setting(True, flag=Flag("--springs/--no-springs", "Switch the follow-through on or off."))
+    stiffness: float = setting(150.0, flag=Flag(
+        "--stiffness", "Follow-through spring to the motion, 1/s^2: (2 pi f)^2 wobbles at f Hz (158 = 2 Hz)."))
+    link_stiffness: float = setting(150.0, flag=Flag(
+        "--link-stiffness", "Springs between neighbouring sub-joints, 1/s^2."))
+    damping: float = setting(8.0, flag=Flag("--damping", "Drag on the follow-through, 1/s; higher settles sooner."))
+    blend: float = setting(0.5, flag=Flag(
+        "--blend", "Share of the simulated follow-through in the result, 0 (none) to 1."))
 
     def __post_init__(self) -> None:
         check_flag("springs.enabled", self.enabled)

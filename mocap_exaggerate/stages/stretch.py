@@ -29,6 +29,7 @@ import numpy as np
 from ..analysis.limbs import limb_length
 from ..core.errors import ConfigError, check_number
 from ..core.rotations import quat_between, quat_rotate
+from ..core.settings import Flag, setting
 from ..core.timing import parse_duration, parse_frame
 from .state import StretchKey
 
@@ -496,7 +497,9 @@ class AutoStretchConfig:
         the thesis: limbs about 2, torso at most the limbs, 5 the extreme)
     """
 
-    enabled: bool = False
+    enabled: bool = setting(False, flag=Flag(
+        "--auto-stretch/--no-auto-stretch",
+        "Find strikes (punches, kicks, throws, leaps) and stretch them by the style's scale."))
     arm: float = 2.0
     leg: float = 2.0
     spine: float = 1.5

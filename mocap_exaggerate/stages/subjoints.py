@@ -24,6 +24,7 @@ import numpy as np
 
 from ..analysis.branches import minor_branches, rubber_groups
 from ..core.errors import ConfigError, check_flag
+from ..core.settings import Flag, setting
 from ..core.skeleton import POSITION_CHANNELS, Skeleton
 
 if TYPE_CHECKING:
@@ -42,6 +43,17 @@ __all__ = [
 
 #: Most sub-links a link is cut into, by count or by length.
 MAX_CUTS = 32
+def length_value(text: str) -> float | str:
+    """A ``--sublink-length`` word: a number of skeleton units, or a share such as ``'3%'``
+    (anything else is kept as given, for `SubjointConfig` to name in its error)."""
+    if text.strip().endswith("%"):
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 @dataclass(frozen=True, kw_only=True)
 class SubjointConfig:
     """Settings of the sub-joint block.
@@ -55,9 +67,13 @@ class SubjointConfig:
     rigid : extra joint-name patterns whose subtrees ride rigidly (no sub-joints)
     """
 
-    enabled: bool = True
-    per_link: int = 4
-    sublink_length: float | str | None = None
+    enabled: bool = setting(True, flag=Flag(
+        "--no-subjoints", "Switch the rubber sub-joint hierarchy (Bézier groups) off.", sets=False))
+    per_link: int = setting(4, flag=Flag(
+        "--subjoints", "Cut every link into M rubber sub-links (default from the preset, 4 in cartoon).", metavar="M"))
+    sublink_length: float | str | None = setting(None, flag=Flag(
+        "--sublink-length", "Instead of M: target sub-link length, in skeleton units or as '3%' of the height.",
+        metavar="LEN", parse=length_value))
     groups: tuple[tuple[str, ...], ...] = field(default=())
     rigid: tuple[str, ...] = field(default=())
 
