@@ -22,7 +22,8 @@ log = logging.getLogger("mocap_exaggerate")
 
 def batch_options(options: dict[str, Any], *, overwrite: bool, resume: bool):
     """The `BatchOptions` the options given make, checked once (a bad unit, skin or joint map
-    would fail every clip alike): the config resolved, its GLB settings as the batch's."""
+    would fail every clip alike): the config resolved, its files' paths made absolute (workers
+    may run elsewhere: a Dask cluster)."""
     from mocap_exaggerate.io.skin import load_skin
     from mocap_exaggerate.jobs.batch import BatchOptions
 
@@ -30,14 +31,13 @@ def batch_options(options: dict[str, Any], *, overwrite: bool, resume: bool):
     settings = config.glb
     joint_map_of(config)  # read once: a bad line is said before any clip runs
     if settings.skin and settings.enabled:
-        load_skin(settings.skin)
+        load_skin(settings.skin)  # parsed once: the digest and the clips run here reuse it
 
-    def absolute(path: str) -> str | None:  # workers may run elsewhere (a Dask cluster): no relative paths
-        return str(Path(path).resolve()) if path else None
+    def absolute(path: str) -> str:
+        return str(Path(path).resolve()) if path else ""
 
-    return BatchOptions(config, preset=preset, overwrite=overwrite, resume=resume, glb=settings.enabled,
-                        skin=absolute(settings.skin), joint_map=absolute(settings.joint_map), units=settings.units,
-                        influences=settings.influences)
+    glb = dataclasses.replace(settings, skin=absolute(settings.skin), joint_map=absolute(settings.joint_map))
+    return BatchOptions(dataclasses.replace(config, glb=glb), preset=preset, overwrite=overwrite, resume=resume)
 
 
 def run_reported(clips, out_dir: Path, options, *, jobs: int, as_json: bool, problems=(),

@@ -169,3 +169,10 @@ def mesh_pieces(skin) -> np.ndarray:
     edges = np.concatenate([skin.faces[:, [0, 1]], skin.faces[:, [1, 2]], skin.faces[:, [2, 0]]])
     graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(skin.num_vertices,) * 2)
     return connected_components(graph, directed=False)[1]
+
+
+def no_glb(preset: str):
+    """A shipped preset's config with the GLB switched off (``[glb] enabled = false``): the BVH alone."""
+    from mocap_exaggerate.config import resolve_config
+
+    return resolve_config(preset, overrides={"glb": {"enabled": False}})

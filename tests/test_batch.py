@@ -17,11 +17,10 @@ from pathlib import Path
 
 import pytest
 
-from mocap_exaggerate import load_preset
 from mocap_exaggerate.jobs.batch import BatchOptions, Clip, find_clips, glob_regex, run_batch
 from mocap_exaggerate.jobs.job import check_output_set
 
-from .helpers import SAMPLE_DIR
+from .helpers import SAMPLE_DIR, no_glb
 
 RUN = SAMPLE_DIR / "cmu_09_01_run_daz.bvh"
 SIT = SAMPLE_DIR / "mocapbank_sit_down_stand_up.bvh"
@@ -272,7 +271,7 @@ def test_the_library_runs_a_batch_and_hears_of_each_file(tmp_path):
     assert [Path(p.input).name for p in problems] == ["again"]  # the loop, met on the way
     heard = []
     results = run_batch(clips + [Clip(folder / "empty.bvh", Path("empty.bvh"))], tmp_path / "out",
-                        BatchOptions(load_preset("subtle"), glb=False), on_result=heard.append)
+                        BatchOptions(no_glb("subtle")), on_result=heard.append)
     assert [r.status for r in results] == ["converted", "failed"] and heard == results
     assert results[0].outputs["bvh"].endswith("jumps/jump.bvh") and results[1].error.endswith("file is empty")
 

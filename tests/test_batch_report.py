@@ -16,11 +16,10 @@ from urllib.parse import unquote, unquote_to_bytes
 
 import pytest
 
-from mocap_exaggerate import load_preset
 from mocap_exaggerate.jobs.batch import BatchOptions, FileResult, find_clips, run_batch
 from mocap_exaggerate.viz.report import GENERATOR, picture_paths, pictures_current, write_report
 
-from .helpers import SAMPLE_DIR
+from .helpers import SAMPLE_DIR, no_glb
 from .test_batch import JUMP, RUN, command, files_under, mixed_folder
 
 needs_dask = pytest.mark.skipif(find_spec("distributed") is None,
@@ -69,12 +68,12 @@ def test_the_library_runs_a_batch_on_dask_and_resumes(tmp_path):
     shutil.copy(RUN, folder / "a" / "run.bvh")
     shutil.copy(JUMP, folder / "jump.bvh")
     clips, problems = find_clips(folder)
-    options = BatchOptions(load_preset("subtle"), preset="subtle", glb=False)
+    options = BatchOptions(no_glb("subtle"), preset="subtle")
     heard = []
     results = run_batch(clips, tmp_path / "out", options, jobs=2, scheduler="local", on_result=heard.append)
     assert [r.status for r in results] == ["converted", "converted"] and len(heard) == 2
     assert [r.input for r in results] == [str(c.source) for c in clips]  # in the clips' order
-    again = run_batch(clips, tmp_path / "out", BatchOptions(options.config, preset="subtle", glb=False, resume=True),
+    again = run_batch(clips, tmp_path / "out", BatchOptions(options.config, preset="subtle", resume=True),
                       jobs=1, scheduler="local")
     assert [r.status for r in again] == ["skipped", "skipped"]
     assert again[0].frames == results[0].frames and again[0].outputs == results[0].outputs  # told by the manifest
@@ -225,7 +224,7 @@ def test_the_report_never_replaces_what_it_did_not_write(tmp_path, name, says):
 
 def test_an_interrupted_batch_reports_what_did_not_start(tmp_path):
     clips, _ = find_clips(SAMPLE_DIR)
-    results = run_batch(clips[:1], tmp_path, BatchOptions(load_preset("cartoon"), glb=False, report=True))
+    results = run_batch(clips[:1], tmp_path, BatchOptions(no_glb("cartoon"), report=True))
     write_report(tmp_path, results, pending=clips[1:])
     page = parse(tmp_path / "index.html")
     text = (tmp_path / "index.html").read_text()

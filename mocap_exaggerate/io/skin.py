@@ -362,12 +362,54 @@ def check_skin(skin: Skin, source: str) -> Skin:
     return skin
 
 
+#: The last skin read in this process, by `_file_key`: a batch reads its one character for the
+#: CLI's check, the parameters' digest and every clip of a worker; it is parsed once. One only,
+#: so a process never holds more than the skin it is using.
+_LAST: dict[tuple, Skin] = {}
+
+
+def _file_key(path: str | os.PathLike) -> tuple | None:
+    """What a skin read from ``path`` depends on: the file's bytes (and for a MakeHuman ``.obj``
+    those of the ``.mhw``/``.mhskel`` files beside it), as SHA-256 digests; None when it cannot be
+    read (the reader then says why). Hashing is about 1/50 of parsing, and unlike a modification
+    time it cannot miss a file rewritten within the clock's tick."""
+    import hashlib
+
+    try:
+        real = Path(os.path.realpath(path))
+        files = [real]
+        if real.suffix.lower() == ".obj":
+            files += sorted(p for p in real.parent.iterdir() if p.suffix.lower() in (".mhw", ".mhskel"))
+        digests = []
+        for file in files:
+            with open(file, "rb") as stream:
+                digests.append((str(file), hashlib.file_digest(stream, "sha256").hexdigest()))
+        return tuple(digests)
+    except OSError:
+        return None
+
+
 def load_skin(path: str | os.PathLike) -> Skin:
     """A skin from ``.npz``, a glTF/GLB skinned mesh, or a MakeHuman ``.obj`` (with its ``.mhw`` beside it).
 
     Whatever is wrong with the file ends in one InputError naming it; the
-    skin that comes back has passed `check_skin`.
+    skin that comes back has passed `check_skin`. The same unchanged file read again in the
+    same process is the same `Skin` (its arrays are read-only, so no user of it can change
+    it for the next).
     """
+    key = _file_key(path)
+    if key is not None and key in _LAST:
+        return _LAST[key]
+    skin = _read_skin(path)
+    if key is not None:
+        for array in (skin.vertices, skin.faces, skin.joints, skin.weights):
+            array.flags.writeable = False
+        _LAST.clear()
+        _LAST[key] = skin
+    return skin
+
+
+def _read_skin(path: str | os.PathLike) -> Skin:
     label = str(path)
     suffix = Path(path).suffix.lower()
     loaders = {".npz": load_npz_skin, ".glb": load_gltf_skin, ".gltf": load_gltf_skin, ".obj": load_makehuman_skin}

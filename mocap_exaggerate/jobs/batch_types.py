@@ -36,6 +36,10 @@ class Clip:
 class BatchOptions:
     """What every clip of a batch is converted with (`convert`'s options).
 
+    config : the pipeline, its ``[glb]`` block included (whether the GLB is written, its units
+        and influences, the character and its joint map): the one place they are said. Give
+        file paths that every worker can read (absolute ones, for a Dask cluster)
+    preset : the shipped preset it was resolved from, recorded in each manifest
     resume : keep the clips whose output set is complete and was made from the same
         input bytes with the same parameters; redo the rest (replacing what they left)
     overwrite : replace existing outputs; without it (or resume) a clip whose outputs
@@ -47,11 +51,6 @@ class BatchOptions:
     preset: str | None = None
     overwrite: bool = False
     resume: bool = False
-    glb: bool = True
-    skin: str | None = None
-    joint_map: dict | None = None
-    units: str = "auto"
-    influences: int = 4
     report: bool = False
 
 

@@ -22,8 +22,9 @@ def batch_parameters(options: BatchOptions) -> str:
     """The digest of what shapes a batch's outputs (`parameters_digest`), recorded in each manifest."""
     from .job import parameters_digest
 
-    return parameters_digest(options.config, preset=options.preset, glb=options.glb, units=options.units,
-                             influences=options.influences, skin=options.skin, joint_map=options.joint_map)
+    glb = options.config.glb
+    return parameters_digest(options.config, preset=options.preset, glb=glb.enabled, units=glb.units,
+                             influences=glb.influences, skin=glb.skin or None, joint_map=glb.joint_map or None)
 
 
 def is_complete(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions, parameters: str | None = None) -> bool:

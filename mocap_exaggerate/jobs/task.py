@@ -43,9 +43,7 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
             if redo is None:
                 return kept_result(label, clip, out_dir, started)
         record = convert(clip.source, Path(out_dir) / clip.relative.parent, options.config, preset=options.preset,
-                         name=clip.name, label=label, overwrite=options.overwrite or options.resume, glb=options.glb,
-                         skin=options.skin, joint_map=options.joint_map, units=options.units,
-                         influences=options.influences,
+                         name=clip.name, label=label, overwrite=options.overwrite or options.resume,
                          parameters=parameters)
     except OutputExistsError as error:
         return failed(f"{error}; --overwrite replaces it (batch --resume keeps finished clips, redoes the rest)")
