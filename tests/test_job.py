@@ -240,3 +240,25 @@ def test_the_public_names_stay_the_functions_after_every_subpackage_is_imported(
     from mocap_exaggerate import run
 
     assert callable(run)
+
+
+def test_units_guessed_into_an_unlikely_figure_are_said(sample_clip, tmp_path):
+    """A 64-unit skeleton (inches, say) guessed as centimetres makes a 0.64 m figure: the user hears
+    it with what to give, and not for a figure of a likely height or units given."""
+    from dataclasses import replace as changed
+
+    from mocap_exaggerate import save_bvh
+    from mocap_exaggerate.io.bvh import read_bvh as read
+
+    motion, _ = read(sample_clip.read_bytes())
+    factor = 64.0 / motion.skeleton.height()
+    skeleton = changed(motion.skeleton, offsets=motion.skeleton.offsets * factor,
+                       end_sites=motion.skeleton.end_sites * factor)
+    small = tmp_path / "inches.bvh"
+    save_bvh(motion.replace(skeleton=skeleton, local_positions=motion.local_positions * factor), small)
+    record = convert(small, tmp_path / "out", FAST)
+    said = [w for w in record.warnings if "GLB units" in w]
+    assert len(said) == 1 and "0.64 m tall" in said[0] and "--units in" in said[0], record.warnings
+    assert record.manifest["outputs"]["units"].startswith("cm (guessed")
+    assert not [w for w in convert(small, tmp_path / "given", FAST, units="in").warnings if "GLB units" in w]
+    assert not [w for w in convert(sample_clip, tmp_path / "likely", FAST).warnings if "GLB units" in w]

@@ -300,6 +300,11 @@ def convert(
                               up=config.input.up)
     timings["read"] = time.perf_counter() - started
     warnings = list(report.warnings) + changed
+    if glb and not to_stream:
+        from ..io.gltf import guessed_units_warning
+
+        unlikely = guessed_units_warning(units, motion.skeleton.height())
+        warnings += [unlikely] if unlikely else []
     binding = None
     if skin is not None and glb and not to_stream:  # bound before the run: a skin that will not bind costs nothing
         from ..rig.binding import bind_skin_to_clip
