@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from .app import cli, fail_cleanly, quiet, verbosity_options
-from .options import FilePath, character_options, config_from_options, joint_map_of, pipeline_options
+from .options import FilePath, character_options, config_from_options, pipeline_options
 
 
 @cli.command()
@@ -48,6 +48,6 @@ def preview(input_path: Path, output: Path, count: int, trajectory: str | None, 
     from_stdin = str(input_path) == "-"
     write_preview(sys.stdin.buffer if from_stdin else input_path, output, config, frames=count, overwrite=overwrite,
                   label="<stdin>" if from_stdin else None, trajectory=trajectory, start=start, seconds=seconds,
-                  skin=config.glb.skin or None, joint_map=joint_map_of(config))
+                  skin=config.glb.skin or None, joint_map=config.glb.joint_map or None)
     if not quiet():
         click.echo(f"wrote {output}", err=True)

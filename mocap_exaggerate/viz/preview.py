@@ -4,8 +4,7 @@ writes the picture its file name asks for.
 ``.png`` still frames of the skinned body captured and exaggerated, or one
 joint's path (`stills`); ``.gif`` and ``.mp4`` the two bodies side by side,
 moving (`animation`). The bodies are posed in `posing`, and what each picture
-shows is chosen in `framing`. Their public names are also here, where they
-were first.
+shows is chosen in `framing`.
 """
 
 from __future__ import annotations
@@ -20,24 +19,11 @@ import numpy as np
 from ..core.errors import ConfigError
 from ..core.skeleton import Skeleton
 from ..rig.skinning import Skin
-from .animation import (
-    MAX_FPS,
-    MAX_SECONDS,
-    NO_FFMPEG,
-    animation_frames,
-    gif_durations,
-    render_frames,
-    render_gif,
-    render_mp4,
-)
-from .framing import fastest_end, lined_up, preview_window, telling_frames, telling_window, view_limits
-from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, PosedBodies, pose_bodies, pose_skin
+from .animation import MAX_FPS, NO_FFMPEG, render_gif, render_mp4
+from .framing import preview_window
 from .stills import render_preview, render_trajectory
 
-__all__ = ["pose_skin", "pose_bodies", "PosedBodies", "view_limits", "render_preview", "telling_frames", "lined_up",
-           "write_preview", "fastest_end", "render_trajectory", "telling_window", "preview_window",
-           "animation_frames", "render_frames", "render_gif", "render_mp4", "gif_durations", "joint_named",
-           "PREVIEW_SUFFIXES", "MAX_FPS", "MAX_SECONDS", "NO_FFMPEG", "CAPTURED_COLOR", "EXAGGERATED_COLOR"]
+__all__ = ["write_preview", "joint_named", "PREVIEW_SUFFIXES"]
 
 PREVIEW_SUFFIXES = (".png", ".gif", ".mp4")
 
@@ -69,7 +55,8 @@ def _kind(output: Path, trajectory: str | None) -> str:
 def write_preview(source, output: str | os.PathLike, config=None, *, frames: int = 5, overwrite: bool = False,
                   label: str | None = None, trajectory: str | None = None, start: float = 0.0,
                   seconds: float | None = None, max_fps: float = MAX_FPS,
-                  skin: Skin | str | os.PathLike | None = None, joint_map: dict | None = None) -> Path:
+                  skin: Skin | str | os.PathLike | None = None,
+                  joint_map: dict[str, str] | str | os.PathLike | None = None) -> Path:
     """Run the pipeline on a clip (path, bytes or stream) and write its preview to ``output``.
 
     By the suffix: ``.png`` the body at ``frames`` evenly spaced frames (`render_preview`), or
@@ -78,7 +65,7 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     and ``seconds`` choose the part of the motion shown (default: all of it; an animation
     stops at `MAX_SECONDS`). The name, the joint and ffmpeg are checked and the target is
     checked (never an input; taken only with ``overwrite``) before the clip is run. ``skin``
-    (a `Skin` or a skin file, with ``joint_map`` for joints the pairing misses) is the body drawn,
+    (a `Skin` or a skin file, with ``joint_map``, pairs or a joint map file, for joints the pairing misses) is the body drawn,
     bound to the clip as the GLB's is (`mocap_exaggerate.rig.binding`); default: the capsule body.
     """
     from ..config import load_preset
@@ -89,8 +76,12 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
 
     output = Path(output)
     kind = _kind(output, trajectory)
-    inputs = [Path(p) for p in (source, skin) if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
+    inputs = [Path(p) for p in (source, skin, joint_map) if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
     check_targets({"preview": output}, inputs, overwrite)
+    if joint_map is not None and not isinstance(joint_map, dict):
+        from ..rig.binding import read_joint_map
+
+        joint_map = read_joint_map(joint_map)
     config = config or load_preset("cartoon")
     motion, _ = read_bvh(source, name=label, fps=config.input.fps, root_offset=config.input.root_offset,
                          up=config.input.up)

@@ -44,7 +44,8 @@ def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
     digest the pictures were drawn from.
     """
     from ..io.files import write_files
-    from .preview import fastest_end, render_preview, render_trajectory, telling_frames, telling_window
+    from .framing import fastest_end, telling_frames, telling_window
+    from .stills import render_preview, render_trajectory
 
     motion, result = record.captured, record.result
     paths = picture_paths(out_dir, record.outputs["manifest"])
