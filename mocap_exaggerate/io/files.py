@@ -10,7 +10,22 @@ from pathlib import Path
 
 from ..core.errors import MocapError
 
-__all__ = ["OutputExistsError", "OutputSet", "atomic_write", "write_files", "same_file", "remove_stale_temporaries"]
+__all__ = ["OutputExistsError", "OutputSet", "atomic_write", "write_files", "same_file", "remove_stale_temporaries",
+           "digest_of", "digest_of_file"]
+
+
+def digest_of(data: bytes | list[bytes]) -> str:
+    """``sha256:<hex>`` of bytes, or of a list of pieces taken as one file."""
+    digest = hashlib.sha256()
+    for piece in [data] if isinstance(data, (bytes, bytearray, memoryview)) else data:
+        digest.update(piece)
+    return "sha256:" + digest.hexdigest()
+
+
+def digest_of_file(path: str | os.PathLike) -> str:
+    """``sha256:<hex>`` of a file's bytes, read in pieces (a long clip is not held twice); OSError as opening raises it."""
+    with open(path, "rb") as stream:
+        return "sha256:" + hashlib.file_digest(stream, "sha256").hexdigest()
 
 
 class OutputExistsError(MocapError, FileExistsError):

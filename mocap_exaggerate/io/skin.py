@@ -373,18 +373,14 @@ def _file_key(path: str | os.PathLike) -> tuple | None:
     those of the ``.mhw``/``.mhskel`` files beside it), as SHA-256 digests; None when it cannot be
     read (the reader then says why). Hashing is about 1/50 of parsing, and unlike a modification
     time it cannot miss a file rewritten within the clock's tick."""
-    import hashlib
+    from .files import digest_of_file
 
     try:
         real = Path(os.path.realpath(path))
         files = [real]
         if real.suffix.lower() == ".obj":
             files += sorted(p for p in real.parent.iterdir() if p.suffix.lower() in (".mhw", ".mhskel"))
-        digests = []
-        for file in files:
-            with open(file, "rb") as stream:
-                digests.append((str(file), hashlib.file_digest(stream, "sha256").hexdigest()))
-        return tuple(digests)
+        return tuple((str(file), digest_of_file(file)) for file in files)
     except OSError:
         return None
 

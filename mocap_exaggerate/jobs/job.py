@@ -19,7 +19,6 @@ Example::
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import time
@@ -36,10 +35,9 @@ from ..config import DEFAULT_PRESET, GlbConfig, PipelineConfig, load_preset
 from ..core.errors import ConfigError, InputError
 from ..core.motion import Motion
 from ..io.bvh import iter_bvh, read_bvh, read_source
-from ..io.files import OutputExistsError, OutputSet, remove_stale_temporaries, same_file
+from ..io.files import OutputExistsError, OutputSet, digest_of, digest_of_file, remove_stale_temporaries, same_file
 from ..pipeline import PipelineResult, run
 from ..rig.skinning import Skin
-from .outputs import file_digest
 
 __all__ = ["JobRecord", "convert", "output_paths", "check_name", "check_targets", "check_output_set", "describe",
            "parameters_digest", "recorded_config"]
@@ -143,19 +141,19 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
             value = load_skin(value)
         arrays = [np.ascontiguousarray(a).tobytes() for a in (value.vertices, value.faces, value.joints, value.weights)]
         names = json.dumps([list(value.joint_names), {k: np.asarray(v).tolist() for k, v in sorted(value.bind.items())}])
-        return file_digest(arrays + [names.encode("utf-8")])
+        return digest_of(arrays + [names.encode("utf-8")])
 
     from .. import __version__
 
     pipeline = {block: table for block, table in config.to_dict().items() if block != "glb"}
     fields = {"version": __version__, "preset": preset, "config": pipeline, "glb": bool(glb),
               "units": units, "influences": int(influences), "skin": skin_content(skin),
-              "path_file": file_digest(Path(path_file).read_bytes()) if path_file is not None else None}
+              "path_file": digest_of_file(path_file) if path_file is not None else None}
     if joint_map is not None:  # only when given: digests of runs without one stay what they were
         from ..rig.binding import read_joint_map
 
         fields["joint_map"] = joint_map if isinstance(joint_map, dict) else read_joint_map(joint_map)
-    return file_digest(json.dumps(fields, sort_keys=True, default=str).encode("utf-8"))
+    return digest_of(json.dumps(fields, sort_keys=True, default=str).encode("utf-8"))
 
 
 def check_targets(targets: dict[str, Path], inputs: list[Path], overwrite: bool) -> None:
@@ -314,7 +312,7 @@ def convert(
     timings.update(result.timings)
     for target in targets.values():
         remove_stale_temporaries(target, keep=inputs)  # what a killed earlier run of these outputs left
-    input_hash = file_digest(data)
+    input_hash = digest_of(data)
     del data  # the input's bytes are not needed past this point; a long clip's are tens of MB
     info = None
     outputs: dict[str, Any] = {}
@@ -407,15 +405,10 @@ def _named(path: str | os.PathLike | None, folder: Path) -> tuple[str, str]:
         shown = Path(os.path.relpath(target, folder.resolve())).as_posix()
     except ValueError:  # another drive: no relative path leads there
         shown = target.as_posix()
-    return shown, _sha256(target)
-
-
-def _sha256(path: Path) -> str:
     try:
-        with open(path, "rb") as stream:
-            return hashlib.file_digest(stream, "sha256").hexdigest()
+        return shown, digest_of_file(target).removeprefix("sha256:")
     except OSError as error:
-        raise InputError(f"cannot read ({error.strerror or error})", source=str(path)) from None
+        raise InputError(f"cannot read ({error.strerror or error})", source=str(target)) from None
 
 
 def _changed_since_recorded(settings: GlbConfig, now: GlbConfig, skin: Path | None,
@@ -472,7 +465,7 @@ def check_output_set(manifest: str | os.PathLike) -> list[str]:
             continue
         path = manifest.parent / Path(names[kind]).name
         try:
-            actual = file_digest(path.read_bytes())
+            actual = digest_of_file(path)
         except OSError:
             problems.append(f"{path}: missing")
             continue

@@ -6,7 +6,6 @@ where they go and writes them.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import asdict
 from typing import Any
 
@@ -20,15 +19,7 @@ from ..io.bvh import written_positions
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin, top_influences
 
-__all__ = ["file_digest", "manifest", "output_thickness", "base_skin", "output_skin", "make_glb", "glb_files"]
-
-
-def file_digest(data: bytes | list[bytes]) -> str:
-    """``sha256:<hex>`` of bytes, or of a list of pieces taken as one file."""
-    digest = hashlib.sha256()
-    for piece in [data] if isinstance(data, (bytes, bytearray, memoryview)) else data:
-        digest.update(piece)
-    return "sha256:" + digest.hexdigest()
+__all__ = ["manifest", "output_thickness", "base_skin", "output_skin", "make_glb", "glb_files"]
 
 
 def manifest(

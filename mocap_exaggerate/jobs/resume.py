@@ -40,8 +40,8 @@ def redo_reason(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
     The cheap reasons first (no manifest, other options, another input), the
     hashing of every output last.
     """
+    from ..io.files import digest_of_file
     from .job import check_output_set
-    from .outputs import file_digest
 
     manifest = Path(out_dir) / clip.relative.parent / f"{clip.name}.json"
     info = read_manifest(manifest)
@@ -52,7 +52,7 @@ def redo_reason(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
     if info.get("parameters") != parameters:
         return "made with other options"
     try:
-        if file_digest(clip.source.read_bytes()) != (info.get("input") or {}).get("hash"):
+        if digest_of_file(clip.source) != (info.get("input") or {}).get("hash"):
             return "the input changed"
     except OSError:
         return "the input cannot be read"
