@@ -239,18 +239,8 @@ def convert(
     started = time.perf_counter()
     if config is None:
         config = load_preset(preset or DEFAULT_PRESET)
-    settings = config.glb
-    glb = settings.enabled if glb is None else glb
-    units = settings.units if units is None else units
-    influences = settings.influences if influences is None else influences
-    if skin is None and settings.skin:
-        skin = settings.skin
-    if joint_map is None and settings.joint_map:
-        joint_map = settings.joint_map
-    skin_file, map_file = (Path(p) if isinstance(p, (str, os.PathLike)) else None for p in (skin, joint_map))
     to_stream = hasattr(output, "write")
-    inputs = [Path(p) for p in (source, path_file, skin, joint_map, *protect) if isinstance(p, (str, os.PathLike))
-              and str(p) != "-"]
+    glb = (config.glb.enabled if glb is None else glb) and not to_stream
     data, label = read_source(source, label)
     stem = check_name(name if name is not None else _default_name(source))
     if to_stream:
@@ -265,49 +255,34 @@ def convert(
     retired = [] if glb or to_stream else [Path(output) / f"{stem}.glb", Path(output) / f"{stem}.weights.npz"]
     retired = [path for path in retired if path.exists()]
     # Every option first (a bad unit, skin or path file is the first thing said), then the outputs.
-    if glb and not to_stream:
-        from ..io.gltf import unit_scale
-
-        unit_scale(units, 1.0)  # a bad unit is refused before anything runs
-        if influences not in (4, 8):
-            raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
-
-    from ..io.skin import check_skin, load_skin
     from ..io.trails import read_trails
 
     paths = read_trails(path_file) if path_file is not None else None
-    if joint_map is not None and not isinstance(joint_map, dict):
-        from ..rig.binding import read_joint_map
-
-        joint_map = read_joint_map(joint_map)
-    skin_label = "skin" if skin is None or isinstance(skin, Skin) else str(skin)
-    if skin is not None:
-        skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
-    elif joint_map:
-        raise ConfigError("a joint map pairs the clip's joints with a skin's: give the skin too (--skin)")
+    character = _Character.of(config.glb, glb=glb, skin=skin, joint_map=joint_map, units=units, influences=influences)
+    inputs = [Path(p) for p in (source, path_file, character.skin_file, character.map_file, *protect)
+              if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
     recorded = None if to_stream else recorded_config(
-        config, Path(output), glb=glb, units=units, influences=influences, skin=skin_file, joint_map=map_file)
-    changed = [] if recorded is None else _changed_since_recorded(settings, recorded.glb, skin_file, map_file)
+        config, Path(output), glb=glb, units=character.units, influences=character.influences,
+        skin=character.skin_file, joint_map=character.map_file)
+    changed = [] if recorded is None else _changed_since_recorded(config.glb, recorded.glb, character.skin_file,
+                                                                  character.map_file)
     check_targets({**targets, **{f"old {p.suffix}": p for p in retired}}, inputs, overwrite)
     if parameters is None and not to_stream:
-        parameters = parameters_digest(config, preset=preset, glb=glb, units=units, influences=influences, skin=skin,
-                                       path_file=path_file, joint_map=joint_map)
+        parameters = parameters_digest(config, preset=preset, glb=glb, units=character.units,
+                                       influences=character.influences, skin=character.skin, path_file=path_file,
+                                       joint_map=character.joint_map)
 
     timings: dict[str, float] = {}
     motion, report = read_bvh(data, name=label, fps=config.input.fps, root_offset=config.input.root_offset,
                               up=config.input.up)
     timings["read"] = time.perf_counter() - started
     warnings = list(report.warnings) + changed
-    if glb and not to_stream:
+    if glb:
         from ..io.gltf import guessed_units_warning
 
-        unlikely = guessed_units_warning(units, motion.skeleton.height())
+        unlikely = guessed_units_warning(character.units, motion.skeleton.height())
         warnings += [unlikely] if unlikely else []
-    binding = None
-    if skin is not None and glb and not to_stream:  # bound before the run: a skin that will not bind costs nothing
-        from ..rig.binding import bind_skin_to_clip
-
-        skin, binding = bind_skin_to_clip(skin, motion.skeleton, joint_map, skin_label=skin_label, clip_label=label)
+    skin, binding = character.bound_to(motion, label) if glb else (None, None)  # a skin that will not bind costs nothing
     result = run(motion, config, paths=paths)
     timings.update(result.timings)
     for target in targets.values():
@@ -319,10 +294,10 @@ def convert(
     with ThreadPoolExecutor(max_workers=1) as pool, OutputSet(overwrite=True) as written:
         # The GLB is built while the BVH is formatted and written: both spend most of
         # their time in NumPy, which lets go of the GIL, so two cores share the work.
-        if glb and not to_stream:
+        if glb:
             from .outputs import glb_files
 
-            building = pool.submit(_timed, glb_files, motion, result, skin, units, influences)
+            building = pool.submit(_timed, glb_files, motion, result, skin, character.units, character.influences)
         else:
             building = None
         tick = time.perf_counter()
@@ -373,11 +348,68 @@ def convert(
         seconds=time.perf_counter() - started,
         timings=timings,
         warnings=warnings,
-        notes=list(result.notes) + _unnamed(skin, skin_file, joint_map, map_file, to_stream),
+        notes=list(result.notes) + character.unnamed(to_stream),
         manifest=info,
         result=result,
         captured=motion,
     )
+
+
+@dataclass(frozen=True)
+class _Character:
+    """What a job's GLB is made with: the ``[glb]`` block, with the arguments given over it, checked
+    and read (the skin parsed, the joint map read) before anything else of the job runs.
+
+    skin_file, map_file : the files they came from, None for a `Skin` or pairs given as objects
+    """
+
+    glb: bool
+    units: str
+    influences: int
+    skin: Skin | None
+    joint_map: dict[str, str] | None
+    skin_file: Path | None
+    map_file: Path | None
+    skin_label: str
+
+    @classmethod
+    def of(cls, settings: GlbConfig, *, glb: bool, skin, joint_map, units, influences) -> _Character:
+        from ..io.skin import check_skin, load_skin
+
+        units = settings.units if units is None else units
+        influences = settings.influences if influences is None else influences
+        skin = settings.skin or None if skin is None else skin
+        joint_map = settings.joint_map or None if joint_map is None else joint_map
+        skin_file, map_file = (Path(p) if isinstance(p, (str, os.PathLike)) else None for p in (skin, joint_map))
+        if glb:
+            from ..io.gltf import unit_scale
+
+            unit_scale(units, 1.0)  # a bad unit is refused before anything runs
+            if influences not in (4, 8):
+                raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
+        if map_file is not None:
+            from ..rig.binding import read_joint_map
+
+            joint_map = read_joint_map(map_file)
+        if skin is None and joint_map:
+            raise ConfigError("a joint map pairs the clip's joints with a skin's: give the skin too (--skin)")
+        label = str(skin_file) if skin_file is not None else "skin"
+        if skin is not None:
+            skin = load_skin(skin_file) if skin_file is not None else check_skin(skin, "skin")
+        return cls(glb, units, influences, skin, joint_map, skin_file, map_file, label)
+
+    def bound_to(self, motion: Motion, clip_label: str):
+        """The skin bound to the clip's skeleton and its `Binding` (None, None for the default body)."""
+        if self.skin is None:
+            return None, None
+        from ..rig.binding import bind_skin_to_clip
+
+        return bind_skin_to_clip(self.skin, motion.skeleton, self.joint_map, skin_label=self.skin_label,
+                                 clip_label=clip_label)
+
+    def unnamed(self, to_stream: bool) -> list[str]:
+        """Notes for what the pipeline file cannot name: a skin or joint map given as objects."""
+        return _unnamed(self.skin, self.skin_file, self.joint_map, self.map_file, to_stream)
 
 
 def recorded_config(config: PipelineConfig, folder: str | os.PathLike, *, glb: bool, units: str, influences: int,
