@@ -474,17 +474,18 @@ def _unnamed(skin, skin_file, joint_map, map_file, to_stream: bool) -> list[str]
     return notes
 
 
-def check_output_set(manifest: str | os.PathLike) -> list[str]:
+def check_output_set(manifest: str | os.PathLike, info: dict | None = None) -> list[str]:
     """What is wrong with the output set a manifest describes: an empty list when it is complete.
 
     Complete means: the manifest reads, and every file it lists is there with
     the hash it recorded. A run writes its manifest last and deletes the old
     one before replacing anything, so a set interrupted at any point reads as
     incomplete here, never as a complete set of mixed runs.
+    info : the manifest's data, when the caller has read it
     """
     manifest = Path(manifest)
     try:
-        info = json.loads(manifest.read_text(encoding="utf-8"))
+        info = json.loads(manifest.read_text(encoding="utf-8")) if info is None else info
         hashes = dict(info["outputs"]["hashes"])
         names = {kind: str(info["outputs"][kind]) for kind in hashes}
     except FileNotFoundError:

@@ -15,7 +15,7 @@ from pathlib import Path
 from .batch_types import BatchOptions, Clip, FileResult
 from .discovery import read_manifest
 
-__all__ = ["batch_parameters", "is_complete", "redo_reason", "kept_result"]
+__all__ = ["batch_parameters", "is_complete", "redo_reason", "resume_check", "kept_result"]
 
 
 def batch_parameters(options: BatchOptions) -> str:
@@ -35,7 +35,14 @@ def is_complete(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions, p
 
 def redo_reason(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
                 parameters: str | None = None) -> str | None:
-    """Why ``clip`` must be (re)done under ``out_dir``; None when its outputs can be kept.
+    """Why ``clip`` must be (re)done under ``out_dir``; None when its outputs can be kept."""
+    return resume_check(clip, out_dir, options, parameters)[0]
+
+
+def resume_check(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
+                 parameters: str | None = None) -> tuple[str | None, dict | None]:
+    """`redo_reason`, and the manifest as read (None when it does not read), read once for the
+    checks and for `kept_result`.
 
     The cheap reasons first (no manifest, other options, another input), the
     hashing of every output last.
@@ -46,36 +53,39 @@ def redo_reason(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
     manifest = Path(out_dir) / clip.relative.parent / f"{clip.name}.json"
     info = read_manifest(manifest)
     if info is None:
-        return "no outputs yet" if not manifest.exists() else "outputs incomplete (the manifest does not read)"
+        return ("no outputs yet" if not manifest.exists() else "outputs incomplete (the manifest does not read)"), None
     if parameters is None:
         parameters = batch_parameters(options)
     if info.get("parameters") != parameters:
-        return "made with other options"
+        return "made with other options", info
     try:
         if digest_of_file(clip.source) != (info.get("input") or {}).get("hash"):
-            return "the input changed"
+            return "the input changed", info
     except OSError:
-        return "the input cannot be read"
-    problems = check_output_set(manifest)
+        return "the input cannot be read", info
+    problems = check_output_set(manifest, info)
     if problems:
-        return f"outputs incomplete ({problems[0]})"
+        return f"outputs incomplete ({problems[0]})", info
     if options.report:
         from ..viz.report import pictures_current
 
         if not pictures_current(out_dir, manifest):
-            return "its report pictures are missing or were drawn from other outputs"
-    return None
+            return "its report pictures are missing or were drawn from other outputs", info
+    return None, info
 
 
-def kept_result(label: str, clip: Clip, out_dir: str | os.PathLike, started: float) -> FileResult:
+def kept_result(label: str, clip: Clip, out_dir: str | os.PathLike, started: float,
+                info: dict | None = None) -> FileResult:
     """The result of a clip whose complete outputs are kept: what its manifest says.
 
     started : `time.perf_counter` when the clip was taken up
+    info : the manifest, when the caller has read it (`resume_check`)
     """
     from .job import output_paths
 
     folder = Path(out_dir) / clip.relative.parent
-    info = read_manifest(folder / f"{clip.name}.json") or {}
+    if info is None:
+        info = read_manifest(folder / f"{clip.name}.json") or {}
     listed = info.get("outputs") or {}
     outputs = {kind: str(path) for kind, path in output_paths(folder, clip.name).items()
                if kind in listed or kind == "manifest"}

@@ -15,7 +15,7 @@ from pathlib import Path
 from ..core.errors import MocapError
 from ..io.files import OutputExistsError
 from .batch_types import BatchOptions, Clip, FileResult
-from .resume import kept_result, redo_reason
+from .resume import kept_result, resume_check
 
 __all__ = ["convert_file", "clear_temporaries"]
 
@@ -39,9 +39,9 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
     redo = None
     try:
         if options.resume:
-            redo = redo_reason(clip, out_dir, options, parameters)
+            redo, kept = resume_check(clip, out_dir, options, parameters)
             if redo is None:
-                return kept_result(label, clip, out_dir, started)
+                return kept_result(label, clip, out_dir, started, kept)
         record = convert(clip.source, Path(out_dir) / clip.relative.parent, options.config, preset=options.preset,
                          name=clip.name, label=label, overwrite=options.overwrite or options.resume,
                          parameters=parameters)
