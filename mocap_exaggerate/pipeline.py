@@ -32,7 +32,7 @@ from .core.motion import Motion
 from .core.skeleton import Skeleton
 from .stages.contacts import ConstraintPlan, constraints_stage
 from .stages.correct import CorrectReport, correct_stage, max_link_stretch
-from .stages.extrapolate import extrapolate_stage
+from .stages.extrapolate import SpeedLimitReport, extrapolate_stage
 from .stages.orient import orient_stage
 from .stages.springs import springs_stage
 from .stages.state import State
@@ -103,6 +103,8 @@ class PipelineResult:
     stages : names of the stages that ran, in order
     timings : seconds per step, in run order
     correct_report : CorrectReport or None when correction was off
+    speed_report : how much of the exaggeration the speed limit took (`SpeedLimitReport`); None
+        without extrapolation or a limit
     preserve_volume : ``output.preserve_volume``: the skinned outputs (GLB, previews) scale
         each joint by `mocap_exaggerate.jobs.outputs.output_thickness`
     """
@@ -116,6 +118,7 @@ class PipelineResult:
     rest_frames_dropped: bool
     timings: dict[str, float]
     correct_report: CorrectReport | None = None
+    speed_report: SpeedLimitReport | None = None
     max_link_stretch: float = 1.0
     substeps: int = 0
     notes: list[str] = field(default_factory=list)
@@ -191,6 +194,7 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
         rest_frames_dropped=state.rest_frames_dropped,
         timings=timings,
         correct_report=state.correct_report,
+        speed_report=state.speed_report,
         max_link_stretch=max_link_stretch(state.positions, skeleton.parents, skeleton.link_lengths()),
         substeps=state.substeps,
         notes=list(state.notes),

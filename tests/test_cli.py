@@ -454,3 +454,12 @@ def test_the_glb_settings_come_from_a_config_file_and_the_flags_win(runner, samp
     assert info["config"]["glb"] == {"enabled": False, "units": "m", "influences": 8, "skin": "", "skin_sha256": "",
                                      "joint_map": "", "joint_map_sha256": ""}
     assert "glb" not in info["outputs"]
+
+
+def test_a_saturated_omega_is_said_with_v_and_not_without(sample_clip, tmp_path):
+    loud = command("exaggerate", sample_clip, "-o", tmp_path / "a", "--no-glb", "--omega", "30", "--no-subjoints", "-v")
+    assert loud.returncode == 0, loud.stderr
+    said = [line for line in loud.stderr.splitlines() if "speed limit" in line]
+    assert len(said) == 1 and "extrapolate.max_speed" in said[0] and "%" in said[0], loud.stderr
+    quiet = command("exaggerate", sample_clip, "-o", tmp_path / "b", "--no-glb", "--omega", "30", "--no-subjoints")
+    assert quiet.returncode == 0 and "speed limit" not in quiet.stderr

@@ -224,3 +224,44 @@ def test_time_settings_longer_than_10_s_are_refused_in_seconds_and_in_frames(mak
     for absurd in ("3600s", "11s", "20000f", 3600.0):
         with pytest.raises(ConfigError, match="at most 10 s"):
             make(absurd)
+
+
+def test_what_the_speed_limit_took_is_the_share_of_the_displacement_it_removed():
+    """Known answer: a joint asked to move 2 and kept at 1 in every frame lost half; one untouched lost none."""
+    from mocap_exaggerate.stages.extrapolate import Limited
+
+    asked = np.array([[2.0, 1.0], [2.0, 1.0], [2.0, 0.0]])
+    kept = np.array([[1.0, 1.0], [1.0, 1.0], [1.0, 0.0]])
+    assert np.allclose(Limited(asked, kept).taken(), [0.5, 0.0])
+    assert np.allclose(Limited(np.zeros((3, 1)), np.zeros((3, 1))).taken(), [0.0])
+
+
+def test_omega_that_saturates_says_so_and_the_manifest_records_it(sample_clip):
+    """More omega against the speed limit: what it takes grows, and past a quarter of a joint's
+    exaggeration the run says where and how much; under it, or with no limit, nothing is said."""
+    from mocap_exaggerate.config import resolve_config
+    from mocap_exaggerate.jobs.outputs import manifest
+    from mocap_exaggerate.pipeline import run
+
+    motion = read_bvh(sample_clip)[0]
+
+    def ran(omega, max_speed=1.75):
+        return run(motion, resolve_config("cartoon", None, {"extrapolate": {"omega": omega, "max_speed": max_speed},
+                                                            "subjoints": {"enabled": False},
+                                                            "springs": {"enabled": False}}))
+
+    taken = [ran(omega).speed_report.taken for omega in (2, 8, 30)]
+    assert taken[0] < taken[1] < taken[2] and taken[2] > 0.5, taken
+    strong = ran(30)
+    report = strong.speed_report
+    said = [note for note in strong.notes if "speed limit" in note]
+    assert len(said) == 1 and report.joints and report.joints[0][0] in said[0] and "max_speed" in said[0]
+    assert all(share > 0.25 for _, share in report.joints)
+    assert report.seconds is not None and 0 <= report.seconds[0] < report.seconds[1] <= motion.duration + 1e-9
+    assert not [note for note in ran(1.2).notes if "speed limit" in note]
+    assert ran(30, max_speed=0).speed_report is None  # no limit, nothing taken
+    info = manifest(input_name="clip", input_hash="sha256:0", config=resolve_config("cartoon"), preset="cartoon",
+                    result=strong, outputs={}, reader_warnings=[], frames_in=motion.num_frames, fps=motion.fps,
+                    timings={})
+    assert info["result"]["speed_limit"]["taken"] == round(report.taken, 4)
+    assert said[0] in info["warnings"]

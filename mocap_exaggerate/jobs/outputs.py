@@ -72,6 +72,8 @@ def manifest(
         info["result"]["stretch"] = [event.to_dict() for event in result.stretch.events]
     if result.constraints is not None:
         info["result"]["constraints"] = result.constraints
+    if result.speed_report is not None:
+        info["result"]["speed_limit"] = result.speed_report.to_dict()
     if result.correct_report is not None:
         info["result"]["correct"] = {
             k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(result.correct_report).items()

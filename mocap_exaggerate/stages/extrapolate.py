@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -54,7 +54,8 @@ from ..core.timing import end_ramp, gaussian_average, parse_duration, smootherst
 if TYPE_CHECKING:
     from .state import State
 
-__all__ = ["ExtrapolateConfig", "extrapolate", "extrapolate_stage", "resolve_weights", "welded", "ROOT_NAMES", "WELD"]
+__all__ = ["ExtrapolateConfig", "extrapolate", "extrapolate_stage", "Limited", "SpeedLimitReport", "speed_limit_report",
+           "resolve_weights", "welded", "ROOT_NAMES", "WELD"]
 
 #: Widest Gaussian accepted, whatever the clip (a minute; 100,000 frames).
 MAX_SIGMA_SECONDS = 60.0
@@ -166,7 +167,8 @@ def extrapolate(
     torso: tuple[np.ndarray, float] | None = None,
     riders: dict[int, list[int]] | None = None,
     axis: int = 0,
-) -> np.ndarray:
+    return_limited: bool = False,
+) -> np.ndarray | tuple[np.ndarray, Limited]:
     """Exaggerate trajectories away from their Gaussian average.
 
     Parameters
@@ -186,11 +188,12 @@ def extrapolate(
         of their own on top of it (a torso that swings less but still rides with the hips)
     riders : joint -> joints that ride rigidly on it (a foot's toes): the joint's speed limit
         is the slowest of its own and theirs, since whatever it does they do too
+    return_limited : also return what the speed limit left of the exaggeration (`Limited`)
 
     Returns
     -------
     (F, J, 3) float64 ``j + w (omega - 1) r(t) (j * g_smooth - j * g_sigma)``: eq. (1) with a
-    per-joint omega when ``smooth`` and ``ramp`` are 0.
+    per-joint omega when ``smooth`` and ``ramp`` are 0. With ``return_limited``, and `Limited`.
 
     Examples
     --------
@@ -210,7 +213,8 @@ def extrapolate(
             raise ValueError(f"weights must be ({moved.shape[1]},), got {weights.shape}")
         gain = gain * weights
     if not np.any(gain):
-        return world_pos.copy()
+        none = np.zeros(moved.shape[:2])
+        return (world_pos.copy(), Limited(none, none)) if return_limited else world_pos.copy()
     smoothed = gaussian_average(moved, smooth)
     deviation = smoothed - gaussian_average(moved, sigma)
     if torso is not None and len(torso[0]):
@@ -223,6 +227,7 @@ def extrapolate(
         deviation *= spread_max(moving, max(int(round(sigma)), 1))[..., None]
     if ramp > 0:
         deviation *= end_ramp(len(moved), ramp)[:, None, None]
+    asked = np.linalg.norm(deviation, axis=-1) if return_limited else None
     if max_speed > 0 and len(moved) > 2:
         top = np.linalg.norm(np.diff(moved, axis=0), axis=-1).max(axis=0)
         for joint, below in (riders or {}).items():
@@ -231,7 +236,23 @@ def extrapolate(
                 top[joint] = min(top[joint], moving.min())
         budget = (max_speed - 1.0) * top
         deviation = _limit_speed(deviation, budget, max(int(round(sigma / 3.0)), 2))
-    return np.moveaxis(moved + deviation, 0, axis)
+    out = np.moveaxis(moved + deviation, 0, axis)
+    if return_limited:
+        return out, Limited(asked, np.linalg.norm(deviation, axis=-1))
+    return out
+
+
+class Limited(NamedTuple):
+    """What the speed limit left of the exaggeration: each joint's displacement from its
+    captured path per frame ``(F, J)``, as asked (omega, weights, stillness, ramp) and as kept."""
+
+    asked: np.ndarray
+    kept: np.ndarray
+
+    def taken(self) -> np.ndarray:
+        """``(J,)`` the share of each joint's exaggeration the limit took, over the clip (0 to 1)."""
+        asked = self.asked.sum(axis=0)
+        return np.where(asked > 1e-12, 1.0 - self.kept.sum(axis=0) / np.maximum(asked, 1e-300), 0.0)
 
 
 #: Passes of the speed limit; each leaves less over budget (the gain's own change adds a little speed).
@@ -282,14 +303,74 @@ def extrapolate_stage(state: State, config: ExtrapolateConfig) -> State:
     if asked > 0.5 * sigma:
         notes += (f"extrapolate.smooth {config.smooth!r} is more than half of sigma {config.sigma!r}; used "
                   f"{0.5 * sigma * frame_time:.3g} s (the band between them is what gets exaggerated)",)
-    positions[first:] = extrapolate(
+    positions[first:], limited = extrapolate(
         state.positions[first:], sigma=sigma, omega=config.omega, weights=weights,
         smooth=config.smooth_frames(frame_time), ramp=sigma, max_speed=config.max_speed,
         still=config.still * skeleton.height() * frame_time,
         torso=(torso_joints(skeleton, state.limbs), config.torso) if config.torso != 1 else None,
-        riders=rider_joints(skeleton),
+        riders=rider_joints(skeleton), return_limited=True,
     )
-    return replace(state, positions=positions, notes=notes, speed_limit=config.max_speed)
+    report = speed_limit_report(limited, skeleton, config.max_speed, frame_time, first, sigma)
+    if report is not None and report.joints:
+        notes += (report.note(),)
+    return replace(state, positions=positions, notes=notes, speed_limit=config.max_speed, speed_report=report)
+
+
+#: The speed limit is said (with -v, and in the manifest's warnings) when it takes more than this
+#: share of a joint's exaggeration.
+SPEED_TAKEN_SAID = 0.25
+
+
+@dataclass(frozen=True)
+class SpeedLimitReport:
+    """How much of the exaggeration the speed limit took (the manifest's ``result.speed_limit``).
+
+    max_speed : ``extrapolate.max_speed``
+    taken : the share of the whole body's exaggeration taken (0 to 1)
+    joints : ``(name, share)`` of the joints it took more than `SPEED_TAKEN_SAID` from, most first
+    seconds : where it took the most from the first of them: the span (seconds from the clip's
+        start) where more than that share of its exaggeration is taken, frame by frame
+    """
+
+    max_speed: float
+    taken: float
+    joints: tuple[tuple[str, float], ...]
+    seconds: tuple[float, float] | None
+
+    def note(self) -> str:
+        name, share = self.joints[0]
+        more = f" and {len(self.joints) - 1} more joint(s)" if len(self.joints) > 1 else ""
+        when = f", most from {self.seconds[0]:.2f} to {self.seconds[1]:.2f} s" if self.seconds else ""
+        return (f"the speed limit (extrapolate.max_speed {self.max_speed:g}) took {share:.0%} of {name}'s "
+                f"exaggeration{more}{when}, {self.taken:.0%} of the body's: more omega moves it little more; "
+                f"--set extrapolate.max_speed=3 (or 0, no limit) lets it whip faster")
+
+    def to_dict(self) -> dict:
+        return {"max_speed": self.max_speed, "taken": round(self.taken, 4),
+                "joints": {name: round(share, 4) for name, share in self.joints},
+                "seconds": [round(s, 4) for s in self.seconds] if self.seconds else None}
+
+
+def speed_limit_report(limited: Limited, skeleton: Skeleton, max_speed: float, frame_time: float, first: int,
+                       sigma: float) -> SpeedLimitReport | None:
+    """What the limit took (`SpeedLimitReport`), None without a limit or an exaggeration."""
+    asked = limited.asked.sum()
+    if max_speed <= 0 or asked <= 1e-12:
+        return None
+    taken = limited.taken()
+    order = [j for j in np.argsort(-taken, kind="stable") if taken[j] > SPEED_TAKEN_SAID]
+    seconds = None
+    if order:
+        worst = order[0]
+        window = max(int(round(sigma)), 1)  # frame by frame, over a sigma: where the whip was calmed
+        asked_near = gaussian_average(limited.asked[:, worst], window / 3.0)
+        kept_near = gaussian_average(limited.kept[:, worst], window / 3.0)
+        share = np.where(asked_near > 1e-12, 1.0 - kept_near / np.maximum(asked_near, 1e-300), 0.0)
+        frames = np.flatnonzero(share > SPEED_TAKEN_SAID)
+        if len(frames):
+            seconds = (float((first + frames[0]) * frame_time), float((first + frames[-1] + 1) * frame_time))
+    return SpeedLimitReport(float(max_speed), float(1.0 - limited.kept.sum() / asked),
+                            tuple((skeleton.names[j], float(taken[j])) for j in order), seconds)
 
 
 def resolve_weights(skeleton: Skeleton, weights: tuple[tuple[str, float], ...], limbs: dict | None = None) -> np.ndarray:

@@ -7,7 +7,7 @@ held in a typed field, never a dict key another stage must know:
 ============  ==============================================  ==============================
 stage         reads                                           adds
 ============  ==============================================  ==============================
-extrapolate   positions, captured_pos, limbs                  positions, speed_limit
+extrapolate   positions, captured_pos, limbs                  positions, speed_limit, speed_report
 correct       positions, captured_pos, limbs                  positions, correct_report
 stretch       positions, captured_pos, limbs, paths           positions, stretch, stretch_keys
 subjoints     positions                                       hierarchy, sub_positions
@@ -35,6 +35,7 @@ from .subjoints import SubjointConfig, SubjointHierarchy, build_hierarchy
 
 if TYPE_CHECKING:
     from .correct import CorrectReport
+    from .extrapolate import SpeedLimitReport
     from .stretch import StretchResult
 
 __all__ = ["State", "Output", "Pins", "StretchKey"]
@@ -91,6 +92,7 @@ class State:
 
     speed_limit : the extrapolation's ``max_speed`` (times each joint's captured top
         speed), which the constraints' easing and orientation recovery keep to; 0 is none
+    speed_report : how much of the exaggeration the speed limit took (`SpeedLimitReport`)
     correct_report : what the link correction did
     stretch : the stretch pass's result (events, trails, stretch factors)
     stretch_keys : the lengths the stretches promised (empty when none); None without the stretch stage
@@ -112,6 +114,7 @@ class State:
     paths: dict | None = None
     notes: tuple[str, ...] = ()
     speed_limit: float = 0.0
+    speed_report: SpeedLimitReport | None = None
     correct_report: CorrectReport | None = None
     stretch: StretchResult | None = None
     stretch_keys: tuple[StretchKey, ...] | None = None
