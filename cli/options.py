@@ -134,7 +134,7 @@ def setting_option(block: str, key: str, flag: Flag) -> Callable:
     elif flag.parse is not None:
         extra["callback"] = parsed_each(flag.parse) if flag.multiple else parsed_one(flag.parse)
     elif not flag.multiple:
-        extra["type"] = _CLICK_TYPES.get(_setting_type(block, key))
+        extra["type"] = _setting_type(block, key)
     return click.option(flag.option, name, default=None, multiple=flag.multiple, metavar=flag.metavar,
                         help=flag.help, **extra)
 
@@ -148,12 +148,10 @@ def _setting_type(block: str, key: str) -> type | None:
     """The Python type a setting's field declares, when it is a plain number (for click to read it)."""
     import typing
 
-    cls = type(getattr(PipelineConfig(), block))
+    cls = next(f.default_factory for f in dataclasses.fields(PipelineConfig) if f.name == block)
     hint = typing.get_type_hints(cls)[key]
     return hint if hint in (int, float) else float if hint == float | None else None
 
-
-_CLICK_TYPES = {int: int, float: float}
 
 #: The blocks in the order ``--help`` lists their options: the exaggeration first, how the
 #: clip is read last, the GLB's with the other outputs (`output_options`).

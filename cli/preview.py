@@ -48,6 +48,6 @@ def preview(input_path: Path, output: Path, count: int, trajectory: str | None, 
     from_stdin = str(input_path) == "-"
     write_preview(sys.stdin.buffer if from_stdin else input_path, output, config, frames=count, overwrite=overwrite,
                   label="<stdin>" if from_stdin else None, trajectory=trajectory, start=start, seconds=seconds,
-                  skin=config.glb.skin or None, joint_map=config.glb.joint_map or None)
+                  )
     if not quiet():
         click.echo(f"wrote {output}", err=True)

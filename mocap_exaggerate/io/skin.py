@@ -385,6 +385,13 @@ def _file_key(path: str | os.PathLike) -> tuple | None:
         return None
 
 
+def known_digest(path: str | os.PathLike) -> str | None:
+    """The ``sha256:<hex>`` of the skin file `load_skin` last read at ``path`` in this process
+    (so a job that names its skin does not hash it twice), None when it read no such file."""
+    real = os.path.realpath(path)
+    return next((digest for key in _LAST for name, digest in key[:1] if name == real), None)
+
+
 def load_skin(path: str | os.PathLike) -> Skin:
     """A skin from ``.npz``, a glTF/GLB skinned mesh, or a MakeHuman ``.obj`` (with its ``.mhw`` beside it).
 

@@ -39,7 +39,7 @@ from ..io.files import OutputExistsError, OutputSet, digest_of, digest_of_file, 
 from ..pipeline import PipelineResult, run
 from ..rig.skinning import Skin
 
-__all__ = ["JobRecord", "convert", "output_paths", "check_name", "check_targets", "check_output_set", "describe",
+__all__ = ["JobRecord", "Character", "convert", "output_paths", "check_name", "check_targets", "check_output_set", "describe",
            "parameters_digest", "recorded_config"]
 
 #: Longest output name accepted: leaves room for suffixes and temporary names within 255 bytes.
@@ -258,7 +258,7 @@ def convert(
     from ..io.trails import read_trails
 
     paths = read_trails(path_file) if path_file is not None else None
-    character = _Character.of(config.glb, glb=glb, skin=skin, joint_map=joint_map, units=units, influences=influences)
+    character = Character.of(config.glb, glb=glb, skin=skin, joint_map=joint_map, units=units, influences=influences)
     inputs = [Path(p) for p in (source, path_file, character.skin_file, character.map_file, *protect)
               if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
     recorded = None if to_stream else recorded_config(
@@ -356,8 +356,8 @@ def convert(
 
 
 @dataclass(frozen=True)
-class _Character:
-    """What a job's GLB is made with: the ``[glb]`` block, with the arguments given over it, checked
+class Character:
+    """What a job's GLB (or a preview's body) is made with: the ``[glb]`` block, with the arguments given over it, checked
     and read (the skin parsed, the joint map read) before anything else of the job runs.
 
     skin_file, map_file : the files they came from, None for a `Skin` or pairs given as objects
@@ -373,7 +373,7 @@ class _Character:
     skin_label: str
 
     @classmethod
-    def of(cls, settings: GlbConfig, *, glb: bool, skin, joint_map, units, influences) -> _Character:
+    def of(cls, settings: GlbConfig, *, glb: bool, skin, joint_map, units, influences) -> Character:
         from ..io.skin import check_skin, load_skin
 
         units = settings.units if units is None else units
@@ -437,8 +437,10 @@ def _named(path: str | os.PathLike | None, folder: Path) -> tuple[str, str]:
         shown = Path(os.path.relpath(target, folder.resolve())).as_posix()
     except ValueError:  # another drive: no relative path leads there
         shown = target.as_posix()
+    from ..io.skin import known_digest
+
     try:
-        return shown, digest_of_file(target).removeprefix("sha256:")
+        return shown, (known_digest(target) or digest_of_file(target)).removeprefix("sha256:")
     except OSError as error:
         raise InputError(f"cannot read ({error.strerror or error})", source=str(target)) from None
 

@@ -190,8 +190,6 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
     from ..io.gltf import glb_pieces, unit_scale
     from ..io.skin import npz_bytes
 
-    if influences not in (4, 8):
-        raise ConfigError(f"influences must be 4 or 8, got {influences!r}")
     scale, how = unit_scale(units, motion.skeleton.height())
     bound = output_skin(motion, result, base_skin(motion, result, skin, joint_map), influences)
     from ..analysis.limbs import standing_up

@@ -15,7 +15,7 @@ from pathlib import Path
 from .batch_types import BatchOptions, Clip, FileResult
 from .discovery import read_manifest
 
-__all__ = ["batch_parameters", "is_complete", "redo_reason", "resume_check", "kept_result"]
+__all__ = ["batch_parameters", "is_complete", "resume_check", "kept_result"]
 
 
 def batch_parameters(options: BatchOptions) -> str:
@@ -30,19 +30,13 @@ def batch_parameters(options: BatchOptions) -> str:
 def is_complete(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions, parameters: str | None = None) -> bool:
     """Whether ``clip``'s output set under ``out_dir`` is complete and was made from these input
     bytes with these parameters (`batch_parameters`; computed when not given)."""
-    return redo_reason(clip, out_dir, options, parameters) is None
-
-
-def redo_reason(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
-                parameters: str | None = None) -> str | None:
-    """Why ``clip`` must be (re)done under ``out_dir``; None when its outputs can be kept."""
-    return resume_check(clip, out_dir, options, parameters)[0]
+    return resume_check(clip, out_dir, options, parameters)[0] is None
 
 
 def resume_check(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
                  parameters: str | None = None) -> tuple[str | None, dict | None]:
-    """`redo_reason`, and the manifest as read (None when it does not read), read once for the
-    checks and for `kept_result`.
+    """Why ``clip`` must be (re)done under ``out_dir`` (None when its outputs can be kept), and
+    the manifest as read (None when it does not read), read once for the checks and for `kept_result`.
 
     The cheap reasons first (no manifest, other options, another input), the
     hashing of every output last.
@@ -69,23 +63,20 @@ def resume_check(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
     if options.report:
         from ..viz.report import pictures_current
 
-        if not pictures_current(out_dir, manifest):
+        if not pictures_current(out_dir, manifest, info):
             return "its report pictures are missing or were drawn from other outputs", info
     return None, info
 
 
-def kept_result(label: str, clip: Clip, out_dir: str | os.PathLike, started: float,
-                info: dict | None = None) -> FileResult:
+def kept_result(label: str, clip: Clip, out_dir: str | os.PathLike, started: float, info: dict) -> FileResult:
     """The result of a clip whose complete outputs are kept: what its manifest says.
 
     started : `time.perf_counter` when the clip was taken up
-    info : the manifest, when the caller has read it (`resume_check`)
+    info : its manifest, as `resume_check` read it
     """
     from .job import output_paths
 
     folder = Path(out_dir) / clip.relative.parent
-    if info is None:
-        info = read_manifest(folder / f"{clip.name}.json") or {}
     listed = info.get("outputs") or {}
     outputs = {kind: str(path) for kind, path in output_paths(folder, clip.name).items()
                if kind in listed or kind == "manifest"}

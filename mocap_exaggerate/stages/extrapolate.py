@@ -329,7 +329,7 @@ class SpeedLimitReport:
     taken : the share of the whole body's exaggeration taken (0 to 1)
     joints : ``(name, share)`` of the joints it took more than `SPEED_TAKEN_SAID` from, most first
     seconds : where it took the most from the first of them: the span (seconds from the clip's
-        start) where more than that share of its exaggeration is taken, frame by frame
+        start) around its peak where more than that share of its exaggeration is taken, frame by frame
     """
 
     max_speed: float
@@ -366,9 +366,12 @@ def speed_limit_report(limited: Limited, skeleton: Skeleton, max_speed: float, f
         asked_near = gaussian_average(limited.asked[:, worst], window / 3.0)
         kept_near = gaussian_average(limited.kept[:, worst], window / 3.0)
         share = np.where(asked_near > 1e-12, 1.0 - kept_near / np.maximum(asked_near, 1e-300), 0.0)
-        frames = np.flatnonzero(share > SPEED_TAKEN_SAID)
-        if len(frames):
-            seconds = (float((first + frames[0]) * frame_time), float((first + frames[-1] + 1) * frame_time))
+        peak = int(np.argmax(share))
+        if share[peak] > SPEED_TAKEN_SAID:  # the run of frames over the share around its peak
+            below = np.flatnonzero(share <= SPEED_TAKEN_SAID)
+            start = below[below < peak].max(initial=-1) + 1
+            end = below[below > peak].min(initial=len(share))
+            seconds = (float((first + start) * frame_time), float((first + end) * frame_time))
     return SpeedLimitReport(float(max_speed), float(1.0 - limited.kept.sum() / asked),
                             tuple((skeleton.names[j], float(taken[j])) for j in order), seconds)
 

@@ -68,32 +68,25 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     (a `Skin` or a skin file, with ``joint_map``, pairs or a joint map file, for joints the pairing misses) is the body drawn,
     bound to the clip as the GLB's is (`mocap_exaggerate.rig.binding`); default: the capsule body.
     """
-    from ..config import load_preset
+    from ..config import DEFAULT_PRESET, load_preset
     from ..io.bvh import read_bvh
     from ..io.files import atomic_write
-    from ..jobs.job import check_targets
+    from ..jobs.job import Character, check_targets
     from ..pipeline import run
 
     output = Path(output)
     kind = _kind(output, trajectory)
-    inputs = [Path(p) for p in (source, skin, joint_map) if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
+    config = config or load_preset(DEFAULT_PRESET)
+    # The body drawn is the GLB's: the config's [glb] character, the arguments over it, read and checked as a job's.
+    character = Character.of(config.glb, glb=True, skin=skin, joint_map=joint_map, units=None, influences=None)
+    inputs = [Path(p) for p in (source, character.skin_file, character.map_file)
+              if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
     check_targets({"preview": output}, inputs, overwrite)
-    if joint_map is not None and not isinstance(joint_map, dict):
-        from ..rig.binding import read_joint_map
-
-        joint_map = read_joint_map(joint_map)
-    config = config or load_preset("cartoon")
     motion, _ = read_bvh(source, name=label, fps=config.input.fps, root_offset=config.input.root_offset,
                          up=config.input.up)
     where = label or (str(source) if inputs else "the clip")
     joint = joint_named(motion.skeleton, trajectory, where) if trajectory is not None else None
-    if skin is not None:
-        from ..io.skin import check_skin, load_skin
-        from ..rig.binding import bind_skin_to_clip
-
-        skin_label = "skin" if isinstance(skin, Skin) else str(skin)
-        skin = check_skin(skin, "skin") if isinstance(skin, Skin) else load_skin(skin)
-        skin, _ = bind_skin_to_clip(skin, motion.skeleton, joint_map, skin_label=skin_label, clip_label=where)
+    skin, _ = character.bound_to(motion, where)
     result = run(motion, config)
     if kind == ".gif":
         data = render_gif(motion, result, start=start, seconds=seconds, max_fps=max_fps, skin=skin)

@@ -63,9 +63,11 @@ def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
     return info
 
 
-def pictures_current(out_dir: str | os.PathLike, manifest: str | os.PathLike) -> bool:
-    """Whether the clip's pictures are there and were drawn from the BVH its manifest lists."""
-    return _current_record(picture_paths(out_dir, manifest), _read_json(Path(manifest))) is not None
+def pictures_current(out_dir: str | os.PathLike, manifest: str | os.PathLike, info: dict | None = None) -> bool:
+    """Whether the clip's pictures are there and were drawn from the BVH its manifest lists
+    (``info``: the manifest's data, when the caller has read it)."""
+    listed = info if info is not None else _read_json(Path(manifest))
+    return _current_record(picture_paths(out_dir, manifest), listed) is not None
 
 
 def _current_record(paths: dict[str, Path], listed: dict | None) -> dict | None:
