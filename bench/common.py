@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import tomllib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -12,6 +13,15 @@ ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared" / "data" / "bvh"
 #: Clips whose header states the wrong frame rate (amc2bvh writes 30 fps for 120 Hz captures).
 FPS = {"cmu_16_01_jump_amc2bvh.bvh": 120.0}
+#: Settings laid over every preset by ``--set KEY=VALUE`` (a dotted key, a TOML value), as the CLI's ``--set``.
+OVERRIDES: dict = {}
+
+
+def preset_config(preset: str):
+    """The preset with the command line's ``--set`` overrides laid over it."""
+    from mocap_exaggerate.config import resolve_config
+
+    return resolve_config(preset, overrides=OVERRIDES)
 
 
 def cell(value, fmt: str = ".2f") -> str:
@@ -26,7 +36,16 @@ def run_bench(description: str, measure: Callable[[Path, str], dict], table: Cal
     parser.add_argument("--clips", default="", help="comma-separated substrings of clip names")
     parser.add_argument("--data", type=Path, default=SHARED)
     parser.add_argument("--json", type=Path, default=None, help="also write every figure here")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a setting laid over each preset, e.g. subjoints.enabled=false (repeatable)")
     args = parser.parse_args()
+    for item in args.set:
+        key, _, value = item.partition("=")
+        where = OVERRIDES
+        *parents, last = key.strip().split(".")
+        for name in parents:
+            where = where.setdefault(name, {})
+        where[last] = tomllib.loads(f"v = {value.strip()}")["v"]
     wanted = [s for s in args.clips.split(",") if s]
     clips = [p for p in sorted(args.data.glob("*.bvh")) if not wanted or any(s in p.name for s in wanted)]
     if not clips:

@@ -9,7 +9,8 @@ limb stretch along the output skeleton (peak / 95th percentile / share of frames
 (root speed where the captured root stands still, h/s).
 
 Not a test: run it by hand (``python bench/quality.py``) and quote the figures.
-``--json`` writes every figure; ``--clips``, ``--presets`` choose what runs.
+``--json`` writes every figure; ``--clips``, ``--presets`` choose what runs; ``--set KEY=VALUE`` lays a
+setting over each preset (``--set subjoints.enabled=false``: the knees of the two-bone solve, issue 25).
 """
 
 from __future__ import annotations
@@ -17,16 +18,16 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from common import FPS, cell, run_bench
+from common import FPS, cell, preset_config, run_bench
 
-from mocap_exaggerate import load_bvh, load_preset
+from mocap_exaggerate import load_bvh
 from mocap_exaggerate.analysis.quality import motion_quality
 from mocap_exaggerate.pipeline import run
 
 
 def measure(path: Path, preset: str, config=None) -> dict:
     fps = FPS.get(path.name)
-    config = config or load_preset(preset)
+    config = config or preset_config(preset)
     motion = load_bvh(path, fps=fps)
     start = time.perf_counter()
     result = run(motion, config)

@@ -25,6 +25,7 @@ from mocap_exaggerate.stages.contacts import (
     parse_target,
     soft_floor,
     two_bone_ik,
+    hinge_pole,
 )
 from mocap_exaggerate.stages.stretch import StretchSpec
 
@@ -119,17 +120,78 @@ def test_laplacian_deform_leaves_a_chain_whose_end_stays_put_and_spreads_a_move_
 
 def test_two_bone_ik_known_answer():
     base = np.array([[0.0, 0.0, 0.0]])
-    middle = np.array([[0.0, -1.0, 0.2]])  # bends toward +z now
-    end = np.array([[0.0, -2.0, 0.0]])
+    middle = np.array([[0.0, -0.6, 0.8]])  # bones of 1 and 1, bending toward +z, reaching 0.6 of their length
+    end = np.array([[0.0, -1.2, 0.0]])
     target = np.array([[0.0, -np.sqrt(2.0), 0.0]])
-    knee = two_bone_ik(base, middle * [1, 1, 0] + [0, 0, 0.2], end, target)
-    # Lengths stay 1.0198 and 1.0198 (the current bones); at reach sqrt(2) the knee sits off the line by
-    # sqrt(l^2 - (sqrt2/2)^2), on the +z side.
-    length = np.linalg.norm(middle[0] - base[0])
-    np.testing.assert_allclose(knee[0], [0.0, -np.sqrt(2) / 2, np.sqrt(length**2 - 0.5)], atol=1e-12)
-    # Out of reach: both bones stretch together, straight at the target.
-    far = two_bone_ik(base, middle, end, np.array([[0.0, -3.0, 0.0]]))
-    np.testing.assert_allclose(far[0], [0.0, -1.5, 0.0], atol=1e-12)
+    knee = two_bone_ik(base, middle, end, target)
+    # Well inside reach both lengths are kept: at reach sqrt(2) the knee sits off the line by
+    # sqrt(1 - (sqrt2/2)^2), on the +z side.
+    np.testing.assert_allclose(knee[0], [0.0, -np.sqrt(2) / 2, np.sqrt(0.5)], atol=1e-12)
+    # Far out of reach both bones stretch together, straight at the target.
+    far = two_bone_ik(base, middle, end, np.array([[0.0, -6.0, 0.0]]))
+    np.testing.assert_allclose(far[0], [0.0, -3.0, 0.0], atol=1e-4)
+
+
+def _sweep_knee(base, middle, end, targets, pole=None):
+    """The knee for one chain and a row of targets, as the frames of a clip."""
+    count = len(targets)
+    tile = lambda v: np.repeat(v[None], count, axis=0)  # noqa: E731
+    return two_bone_ik(tile(base), tile(middle), tile(end), targets, None if pole is None else tile(pole))
+
+
+@pytest.mark.parametrize("bend", [0.0, 1e-4, 0.05, 0.6])
+def test_two_bone_ik_leaves_the_chain_where_the_target_is_its_end(bend):
+    base, end = np.zeros(3), np.array([0.0, -2.0 + bend, 0.0])
+    middle = np.array([0.0, -1.0, np.sqrt(max(1.0 - ((2.0 - bend) / 2) ** 2, 0.0))])
+    knee = _sweep_knee(base, middle, end, end[None], pole=np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(knee[0], middle, atol=1e-12)
+
+
+def test_two_bone_ik_moves_the_knee_smoothly_through_full_reach():
+    # A straight leg whose foot is pulled in and out through full reach, in 2000 steps: a length-keeping
+    # solve moves the knee by the square root of the distance to full reach (the first step of 1/1000 of
+    # the leg puts it 4.5 % of the leg off the line); the soft solve keeps it within a few times the foot.
+    base, middle, end = np.zeros(3), np.array([0.0, -1.0, 0.0]), np.array([0.0, -2.0, 0.0])
+    targets = np.zeros((2001, 3))
+    targets[:, 1] = -np.linspace(1.4, 2.6, 2001)
+    knee = _sweep_knee(base, middle, end, targets, pole=np.array([0.0, 0.0, 1.0]))
+    steps = np.linalg.norm(np.diff(knee, axis=0), axis=-1) / np.linalg.norm(np.diff(targets, axis=0), axis=-1)
+    assert steps.max() < 3.0
+    assert np.all(knee[:, 2] >= 0)  # on the pole's side all the way
+    # The lengths: within 4 % inside reach (the straight leg's own departure from the soft solve, let
+    # go as the foot comes in), then a stretch of both bones alike, nearly straight far out.
+    upper = np.linalg.norm(knee - base, axis=-1)
+    lower = np.linalg.norm(targets - knee, axis=-1)
+    inside = np.abs(targets[:, 1]) < 2.0
+    np.testing.assert_allclose(upper[inside], 1.0, atol=0.045)
+    np.testing.assert_allclose(upper, lower, rtol=1e-9)
+    np.testing.assert_allclose(knee[-1], [0.0, -1.3, 0.0], atol=0.07)
+
+
+def test_two_bone_ik_folds_as_rubber_where_lengths_would_swing_the_knee():
+    # A leg folded nearly shut (the foot 5 % of the leg from the hip) with the foot moved past the hip,
+    # across the bend plane: keeping both lengths would swing the knee round by half a turn.
+    base, middle, end = np.zeros(3), np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.1, 0.03])
+    targets = np.zeros((101, 3))
+    targets[:, 1] = np.linspace(0.1, -0.1, 101)
+    targets[:, 2] = 0.03
+    knee = _sweep_knee(base, middle, end, targets)
+    moved = np.linalg.norm(np.diff(knee, axis=0), axis=-1).max()
+    assert moved <= np.linalg.norm(np.diff(targets, axis=0), axis=-1).max() * 1.01
+
+
+def test_hinge_pole_keeps_the_knee_side_where_the_capture_runs_straight():
+    # A knee bending toward +z in its thigh's frame, then straight with its tiny bend flipping side
+    # frame to frame (capture noise): the pole stays on +z.
+    frames = 40
+    bends = np.concatenate([np.linspace(0.6, 0.0, 20), 1e-3 * (-1.0) ** np.arange(20)])
+    chain = np.zeros((frames, 3, 3))
+    chain[:, 1] = np.stack([np.zeros(frames), -np.sqrt(1 - bends**2), bends], axis=-1)
+    chain[:, 2] = chain[:, 1] + np.stack([np.zeros(frames), -np.sqrt(1 - bends**2), -bends], axis=-1)
+    rotation = np.tile([0.0, 0.0, 0.0, 1.0], (frames, 1))
+    pole = hinge_pole(chain, rotation)
+    assert np.all(pole[:, 2] > 0.99)
+    assert hinge_pole(np.zeros((3, 3, 3)) + [[0, 0, 0], [0, -1, 0], [0, -2, 0]], rotation[:3]) is None
 
 
 def test_soft_floor_is_identity_above_smooth_at_the_floor_and_bounded_below():
@@ -176,15 +238,16 @@ def test_a_planted_foot_stays_where_it_was_captured_and_the_leg_keeps_its_bones(
     # The exaggeration moved the ankle; the contact puts it back exactly where it was captured.
     assert np.abs(free.world_positions[inside, ankle] - captured[inside, ankle]).max() > 0.05
     np.testing.assert_allclose(pinned.world_positions[inside, ankle], captured[inside, ankle], atol=1e-9)
-    # Two-bone IK keeps the (exaggerated) bone lengths.
+    # Two-bone IK keeps the (exaggerated) bone lengths, but for what easing the knee's move in time and
+    # the soft solve near full reach take (3.3 % and 0.9 % here; exact without them).
     for upper, lower in ((thigh, knee), (knee, ankle)):
         np.testing.assert_allclose(
             np.linalg.norm(pinned.world_positions[inside, lower] - pinned.world_positions[inside, upper], axis=-1),
             np.linalg.norm(free.world_positions[inside, lower] - free.world_positions[inside, upper], axis=-1),
-            rtol=1e-9)
-    # Far from the contact, nothing changed.
+            rtol=0.035)
+    # Far from the contact, nothing changed (but for the last millionth of the knee's move, eased in time).
     late = slice(runs[0][1] + 20, None)
-    np.testing.assert_allclose(pinned.world_positions[late], free.world_positions[late], atol=1e-12)
+    np.testing.assert_allclose(pinned.world_positions[late], free.world_positions[late], atol=1e-6 * 4.0)
 
 
 def test_the_rubber_leg_is_pinned_too_and_anchor_exaggerated_keeps_the_landing_offset():

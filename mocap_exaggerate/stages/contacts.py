@@ -45,7 +45,7 @@ from ..core.errors import ConfigError, check_choice, check_flag, check_number
 from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
-from ..core.timing import check_duration, parse_duration, parse_frame, smootherstep, spread_max
+from ..core.timing import check_duration, gaussian_average, parse_duration, parse_frame, smootherstep, spread_max
 from .state import Pins
 from .subjoints import even_out
 
@@ -70,6 +70,7 @@ __all__ = [
     "ease_lengths",
     "laplacian_deform",
     "two_bone_ik",
+    "hinge_pole",
     "soft_floor",
     "smootherstep",
 ]
@@ -537,55 +538,114 @@ def laplacian_deform(points: np.ndarray, end: np.ndarray, rest: np.ndarray) -> n
     return out
 
 
+#: The last share of a two-bone chain's reach over which it eases into straight (soft IK).
+SOFT_REACH = 0.1
+#: Reach (base to end over the bones' length) below which a two-bone chain folds as rubber, easing in from the second.
+FOLDED = (0.2, 0.45)
+#: Frames (a Gaussian's sigma) over which a two-bone chain's middle joint's move is eased in time.
+HINGE_EASE = 2.0
+
+
 def two_bone_ik(base: np.ndarray, middle: np.ndarray, end: np.ndarray, target: np.ndarray,
-                bend: np.ndarray | None = None) -> np.ndarray:
+                pole: np.ndarray | None = None, soft: float = SOFT_REACH) -> np.ndarray:
     """The middle joint ``(F, 3)`` that lets a two-bone chain reach ``target`` (its end goes there).
 
-    Both bones keep their current lengths while the target is within reach,
-    bending in the plane the chain bends in now, or in the plane of ``bend``
-    ``(F, 3, 3)`` (base, middle and end of a reference chain, the capture)
-    when given: an exaggerated leg that passes straight has no bend plane of
-    its own, and taking it from the chain swung the knee round in a frame.
-    Past reach (or closer than the bones can fold) both bones scale
-    together, as rubber would.
+    The middle joint moves by as much as a two-bone solve's middle moves
+    between the chain's end now and the target, so the chain is unchanged
+    where the target is its end (a foot easing onto its contact starts from
+    the exaggerated leg, not from a solve of it). The solve keeps both bones'
+    current lengths while the target is well within reach and bends in the
+    plane the chain bends in now, on the side of ``pole`` ``(F, 3)`` (where
+    the knee or elbow points, `hinge_pole`) where the chain runs nearly
+    straight: a straight chain's own bend is noise, and following it swung
+    the knee round.
+
+    Near full reach the solve eases into straight instead of snapping to it
+    (soft IK): over the last ``soft`` share of the reach the bend closes
+    exponentially and the bones lengthen to make up the rest. A
+    length-keeping solve moves the middle joint without bound there (its
+    offset is a square root of the distance to full reach): that was the
+    knee pop of ``--no-subjoints``. Past reach (or closer than the bones
+    can fold) both bones scale together, as rubber would.
     """
     upper = np.linalg.norm(middle - base, axis=-1)
     lower = np.linalg.norm(end - middle, axis=-1)
+    own = _offset_from_line(base, middle, end)
+    if pole is not None:  # the pole decides the side where the chain's own bend is under 5-20 % of its upper bone
+        clear = smootherstep((np.linalg.norm(own, axis=-1) / np.maximum(upper, 1e-12) - 0.05) / 0.15)
+        own = own + (1.0 - clear)[:, None] * 0.2 * upper[:, None] * pole
+    now = _solve_middle(base, upper, lower, end, own, soft)
+    moved = _solve_middle(base, upper, lower, target, own, soft)
+    # Folded nearly shut (a looney squat's thigh onto its shin) keeping both lengths swings the middle
+    # joint by the bones' length over the end's distance from the base times the end's move (12x at
+    # 4 % of the reach): there the middle joint takes its share of the end's move, as rubber.
+    reach = np.minimum(np.linalg.norm(end - base, axis=-1), np.linalg.norm(target - base, axis=-1))
+    folded = smootherstep((FOLDED[1] - reach / np.maximum(upper + lower, 1e-12)) / (FOLDED[1] - FOLDED[0]))
+    share = upper / np.maximum(upper + lower, 1e-12)
+    # The chain's own departure from the solve (a knee nearly straight sits off the soft solve's bend)
+    # is kept where the target is its end and let go as the target moves away.
+    keep = np.exp(-np.linalg.norm(target - end, axis=-1) / np.maximum(soft * (upper + lower), 1e-12))
+    solved = moved + keep[:, None] * (middle - now)
+    return (1.0 - folded)[:, None] * solved + folded[:, None] * (middle + share[:, None] * (target - end))
+
+
+def _solve_middle(base, upper, lower, target, side, soft) -> np.ndarray:
+    """Where a two-bone chain's middle joint goes for its end to reach ``target``, bending toward ``side``."""
     reach = target - base
     distance = np.linalg.norm(reach, axis=-1)
     tiny = 1e-12
     direction = reach / np.maximum(distance, tiny)[:, None]
-    # The bend's side: the middle joint's offset from the base-end line, now (and in the reference,
-    # which leads where it has one), projected across the new line. Not turned onto it: a turn is
-    # undefined as the line swings past a half turn (an exaggerated hip going past a planted
-    # ankle), a projection is not.
-    def offset(b, m, e):
-        line = e - b
-        line = line / np.maximum(np.linalg.norm(line, axis=-1), tiny)[:, None]
-        away = m - b
-        away = away - np.sum(away * line, axis=-1, keepdims=True) * line
-        return away - np.sum(away * direction, axis=-1, keepdims=True) * direction
-
-    side = offset(base, middle, end)
-    if bend is not None:
-        side = offset(bend[:, 0], bend[:, 1], bend[:, 2]) + 0.25 * side
+    # The side projected across the new line (not turned onto it: a turn is undefined where the line
+    # swings past a half turn, a projection is not).
+    side = side - np.sum(side * direction, axis=-1, keepdims=True) * direction
     side_len = np.linalg.norm(side, axis=-1)
     fallback = np.cross(direction, np.eye(3)[np.argmin(np.abs(direction), axis=-1)])
     side = np.where((side_len > tiny)[:, None], side, fallback)
     side /= np.maximum(np.linalg.norm(side, axis=-1), tiny)[:, None]
-    # Scale both bones when the target is out of reach (or inside the fold).
-    scale = np.ones_like(distance)
     longest = upper + lower
     shortest = np.abs(upper - lower)
-    far = distance > longest
-    scale[far] = distance[far] / np.maximum(longest[far], tiny)
+    zone = soft * longest
+    start = longest - zone
+    solved = distance.copy()  # the distance the bones at their lengths reach
+    outer = (distance > start) & (zone > tiny)
+    solved[outer] = start[outer] + zone[outer] * (1.0 - np.exp(-(distance[outer] - start[outer]) / zone[outer]))
+    far = ~outer & (distance > longest)
+    solved[far] = longest[far]
     near = distance < shortest
-    scale[near] = distance[near] / np.maximum(shortest[near], tiny)
-    upper, lower = upper * scale, lower * scale
-    along = np.divide(distance**2 + upper**2 - lower**2, 2 * distance, out=np.zeros_like(distance),
-                      where=distance > tiny)
-    across = np.sqrt(np.maximum(upper**2 - along**2, 0.0))
-    return base + along[:, None] * direction + across[:, None] * side
+    solved[near] = shortest[near]
+    scale = np.divide(distance, solved, out=np.ones_like(distance), where=solved > tiny)
+    along = np.divide(solved**2 + upper**2 - lower**2, 2 * solved, out=np.zeros_like(solved), where=solved > tiny)
+    height = np.sqrt(np.maximum(upper**2 - along**2, 0.0))
+    return base + scale[:, None] * (along[:, None] * direction + height[:, None] * side)
+
+
+def _offset_from_line(base: np.ndarray, middle: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """(F, 3) the middle joint's offset from the base-to-end line: where the chain bends, and how far."""
+    line = end - base
+    line = line / np.maximum(np.linalg.norm(line, axis=-1), 1e-12)[:, None]
+    away = middle - base
+    return away - np.sum(away * line, axis=-1, keepdims=True) * line
+
+
+def hinge_pole(chain: np.ndarray, base_rotation: np.ndarray) -> np.ndarray | None:
+    """(F, 3) unit: the side a captured two-bone chain bends to (where a knee or elbow points).
+
+    chain : (F, 3, 3) the captured base, middle and end; base_rotation : (F, 4) the base joint's
+    captured world rotation. Where the capture bends clearly it is the capture's own bend; where
+    it runs nearly straight (its bend there is noise) the clip's usual bend in the base joint's
+    frame, turned with it: a knee is a hinge, it bends the same way in its thigh's frame all clip
+    long. None for a chain that never bends.
+    """
+    own = _offset_from_line(chain[:, 0], chain[:, 1], chain[:, 2])
+    upper = np.maximum(np.linalg.norm(chain[:, 1] - chain[:, 0], axis=-1), 1e-12)
+    bent = np.linalg.norm(own, axis=-1) / upper
+    local = quat_rotate(quat_inv(base_rotation), own)
+    usual = np.sum(local * bent[:, None], axis=0)  # weighted by how clearly each frame bends
+    if np.linalg.norm(usual) < 1e-9 * len(chain):
+        return None
+    usual = quat_rotate(base_rotation, np.broadcast_to(usual / np.linalg.norm(usual), own.shape))
+    clear = smootherstep((bent - 0.05) / 0.15)[:, None]
+    return clear * own / np.maximum(bent * upper, 1e-12)[:, None] + (1.0 - clear) * usual
 
 
 # ---------------------------------------------------------------------------- the block
@@ -700,7 +760,7 @@ def constrain(
         g = goal(key.end)
         g += weight[:, None] * (out[:, original[key.base]] + key.vectors - g)
     for joint, g in goals.items():
-        _move_end(out, hierarchy, effectors[joint], g, rest, captured_pos)
+        _move_end(out, hierarchy, effectors[joint], g, rest, captured_pos, captured_rot)
 
     if config.enabled and config.floor:
         margin = 0.005 * ground.height
@@ -715,7 +775,8 @@ def constrain(
                 if not np.any(lift > 1e-6 * ground.height):
                     break
                 lift = _spread_lift(lift, ramp, pins.get(joint))
-                _move_end(out, hierarchy, effector, out[:, original[joint]] + lift[:, None] * up, rest, captured_pos)
+                _move_end(out, hierarchy, effector, out[:, original[joint]] + lift[:, None] * up, rest,
+                          captured_pos, captured_rot)
         moving = np.flatnonzero(~hierarchy.rigid[hierarchy.link_child])
         heights = ground.heights(out[:, moving])
         held = np.zeros(heights.shape)
@@ -749,7 +810,7 @@ def _spread_lift(lift: np.ndarray, ramp: float, pinned: np.ndarray | None) -> np
 
 
 def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, rest: np.ndarray,
-              captured: np.ndarray) -> None:
+              captured_pos: np.ndarray, captured_rot: np.ndarray) -> None:
     """Deform the effector's chain (in place) on the frames where its end must move."""
     chain = sub_chain(hierarchy, effector.chain)
     end = out[:, chain[-1]]
@@ -758,11 +819,22 @@ def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, 
         return
     points = out[frames][:, chain]
     if len(chain) == 3:
-        # The capture's bend plane, when the three points are three original joints (not a
-        # two-joint chain cut once).
-        bend = captured[frames][:, list(effector.chain)] if len(effector.chain) == 3 else None
-        middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[frames], bend)
-        new = np.stack([points[:, 0], middle, goal[frames]], axis=1)
+        # The side the capture's knee or elbow points to, when the three points are three original
+        # joints (not a two-joint chain cut once).
+        pole = None
+        if len(effector.chain) == 3:
+            pole = hinge_pole(captured_pos[:, list(effector.chain)], captured_rot[:, effector.chain[0]])
+        middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[frames],
+                             None if pole is None else pole[frames])
+        # The middle joint's move, eased in time: where the hip rushes past a planted foot the solve
+        # turns the knee faster than anything captured turns it.
+        move = np.zeros(end.shape)
+        move[frames] = middle - points[:, 1]
+        move = gaussian_average(move, HINGE_EASE)
+        moving = np.flatnonzero(np.any(np.abs(move) > 0, axis=-1) | np.isin(np.arange(len(end)), frames))
+        out[moving, chain[1]] += move[moving]
+        out[frames, chain[2]] = goal[frames]
+        return
     else:
         new = laplacian_deform(points, goal[frames], rest[chain])
     out[frames[:, None], chain[None, :]] = new
