@@ -10,6 +10,7 @@ resolving one: shipped preset < config file < explicit overrides.
 from __future__ import annotations
 
 import copy
+import logging
 import os
 import re
 import tomllib
@@ -47,6 +48,17 @@ __all__ = [
 DEFAULT_PRESET = "cartoon"
 _TPOSE_MODES = ("auto", "keep", "drop")
 _SKELETON_MODES = ("sub", "original")
+
+
+log = logging.getLogger(__name__)
+
+#: Settings an earlier version wrote into every pipeline file, and why they are gone: such a file still
+#: reads (with a warning), rather than being refused for a key it was written with.
+RETIRED = {
+    ("auto_stretch", key): "strikes are found by their shape now, not by how fast they go (min_reach, min_rise, "
+                           "min_angle, min_leg_angle, window)"
+    for key in ("min_rate", "min_speed", "min_extension")
+}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -245,6 +257,9 @@ class PipelineConfig:
                 raise ConfigError(f"{source}: [{key}] must be a table")
             block_type = _BLOCKS[key]
             known = {f.name for f in fields(block_type)}
+            for name in [n for n in value if (key, n) in RETIRED]:
+                log.warning("%s: %s.%s is retired and ignored: %s", source, key, name, RETIRED[key, name])
+                value = {n: v for n, v in value.items() if n != name}
             for name in value:
                 if name not in known:
                     raise ConfigError(f"{source}: unknown key {key}.{name} (known: {', '.join(sorted(known))})")
@@ -499,7 +514,9 @@ def resolve_config(
         file_table = _parse_toml(config_text, config_source)
         if config_folder is not None:
             file_table = _paths_from(file_table, config_folder)
-        PipelineConfig.from_dict(file_table, source=config_source)  # name the file in its own errors
+        PipelineConfig.from_dict(file_table, source=config_source)  # name the file in its own errors (and warnings)
+        file_table = {key: {n: v for n, v in value.items() if (key, n) not in RETIRED} if isinstance(value, dict)
+                      else value for key, value in file_table.items()}
         table = _laid_over(table, file_table)
     if overrides:
         table = _laid_over(table, overrides)

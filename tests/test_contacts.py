@@ -21,11 +21,11 @@ from mocap_exaggerate.stages.contacts import (
     TargetSpec,
     contact_weights,
     find_ground,
+    hinge_pole,
     laplacian_deform,
     parse_target,
     soft_floor,
     two_bone_ik,
-    hinge_pole,
 )
 from mocap_exaggerate.stages.stretch import StretchSpec
 

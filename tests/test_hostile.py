@@ -226,7 +226,7 @@ CASES = {
     "accent speed not a number": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
                                                    _text(t / "c.toml", '[correct]\naccent_speed = "fast"\n')], 2, "accent_speed"),
     "strike rate NaN": lambda t, c, o: (["exaggerate", c, "-o", o, "--auto-stretch", "--config",
-                                         _text(t / "c.toml", "[auto_stretch]\nmin_rate = nan\n")], 2, "min_rate"),
+                                         _text(t / "c.toml", "[auto_stretch]\nmin_rise = nan\n")], 2, "min_rise"),
     "old strike key": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
                                         _text(t / "c.toml", "[auto_stretch]\nspeed_factor = 3\n")], 2, "speed_factor"),
 }

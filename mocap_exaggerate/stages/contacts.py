@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from ..analysis.branches import incoming_joint, rider_joints, rubber_groups
+from ..analysis.branches import incoming_joint, minor_branches, rider_joints, rubber_groups
 from ..analysis.limbs import Limb
 from ..core.errors import ConfigError, check_choice, check_flag, check_number
 from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
@@ -70,6 +70,7 @@ __all__ = [
     "ease_lengths",
     "laplacian_deform",
     "two_bone_ik",
+    "limb_contacts",
     "hinge_pole",
     "soft_floor",
     "smootherstep",
@@ -390,6 +391,15 @@ def find_contacts(skeleton: Skeleton, captured_pos: np.ndarray, frame_time: floa
                 watched.append(joint)
     return ground, {joint: detect_contacts(captured_pos, effectors[joint], ground, frame_time, config)
                     for joint in watched}
+
+
+def limb_contacts(skeleton: Skeleton, captured_pos: np.ndarray, frame_time: float, limbs: dict[str, Limb],
+                  config: ContactConfig | None = None) -> dict[str, np.ndarray]:
+    """The contact ranges ``(R, 2)`` of the limbs' ends a capture plants (``config.joints``: the feet), by limb."""
+    config = config or ContactConfig()
+    effectors = find_effectors(skeleton, limbs, minor_branches(skeleton))
+    _, touching = find_contacts(skeleton, captured_pos, frame_time, limbs, effectors, config)
+    return {name: touching[limb.end] for name, limb in limbs.items() if limb.end in touching}
 
 
 def contact_weights(runs: np.ndarray, frames: int, ramp) -> np.ndarray:

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from ..analysis.limbs import limb_length
+from ..analysis.strikes import CANDIDATE_REACH, Candidate, strike_candidates
 from ..core.errors import ConfigError, check_number
 from ..core.rotations import quat_between, quat_rotate
 from ..core.settings import Flag, setting
@@ -52,6 +53,7 @@ __all__ = [
     "MAX_SCALE",
     "AutoStretchConfig",
     "find_strikes",
+    "weigh_strikes",
     "strike_scale",
     "overlapping",
 ]
@@ -479,36 +481,33 @@ def _follow(world_pos: np.ndarray, skeleton, limb, target: np.ndarray, span: sli
 class AutoStretchConfig:
     """Automatic stretch events: strikes found in the motion get the style's scale.
 
-    A strike is a punch, kick, throw or leap, found by its shape: an arm or
-    leg straightening fast toward full reach. Its reach (base to end over the
-    limb's full length) peaks at ``min_reach`` or more, having risen within
-    ``window`` seconds either by ``min_extension`` at ``min_rate`` limb
-    lengths per second at its fastest (a punch: the arm unfolds), or by half
-    that while its end flies at ``min_speed`` limb lengths per second relative
-    to the root (a kick: the leg is nearly straight already and swings from
-    the hip). Nothing is relative to the clip's other moves, so a clip made
-    only of punches finds them all. The event runs from where the extension
-    starts (its rate past a quarter of its peak) to the frame of greatest
-    reach; back-to-back strikes (a one-two) shorten the first one's release.
+    A strike is a punch, kick, thrust, throw or reach, found by its shape, whatever its speed
+    (`mocap_exaggerate.analysis.strikes`): an arm or leg whose reach (base to end over the
+    limb's full length) peaks at ``min_reach`` or more, having unfolded by ``min_rise`` within
+    ``window`` seconds, pointing ``min_angle`` degrees or more away from the torso's down line
+    (not hanging or pushed down at the side), and, for a leg, not a step: its foot neither on
+    the ground at full reach nor landing within 0.15 s of it. The event runs from where the
+    extension gets going to the frame of greatest reach; back-to-back strikes (a one-two)
+    shorten the first one's release.
 
-    arm, leg, spine, neck : the style's range of scale per limb: the limb's
-        length at the strike's end, in limb lengths (2: the arm reaches
-        twice its length, whatever the exaggeration had already made of it;
-        the thesis: limbs about 2, torso at most the limbs, 5 the extreme)
+    arm, leg, spine, neck : the style's range of scale per limb: the limb's length at the
+        strike's end, in limb lengths (2: the arm reaches twice its length, whatever the
+        exaggeration had already made of it; the thesis: limbs about 2, torso at most the
+        limbs, 5 the extreme)
     """
 
     enabled: bool = setting(False, flag=Flag(
         "--auto-stretch/--no-auto-stretch",
-        "Find strikes (punches, kicks, throws, leaps) and stretch them by the style's scale."))
+        "Find strikes (punches, kicks, thrusts, throws, reaches) and stretch them by the style's scale."))
     arm: float = 2.0
     leg: float = 2.0
     spine: float = 1.5
     neck: float = 1.5
-    min_rate: float = 3.0
-    min_speed: float = 8.0
-    min_reach: float = 0.85
-    min_extension: float = 0.3
-    window: float = 0.4
+    min_reach: float = 0.92
+    min_rise: float = 0.2
+    min_angle: float = 50.0
+    min_leg_angle: float = 40.0
+    window: float = 0.6
     axes: str = "xyz"
     ease_in: tuple[float, float] | None = (0.5, 0.25)
 
@@ -522,76 +521,64 @@ class AutoStretchConfig:
                 "auto_stretch: the torso (spine, neck) should stretch no more than the limbs (arm, leg), "
                 f"got spine {self.spine:g}, neck {self.neck:g}, arm {self.arm:g}, leg {self.leg:g}"
             )
-        check_number("auto_stretch.min_rate", self.min_rate, 0, 100)
-        check_number("auto_stretch.min_speed", self.min_speed, 0, 1000)
         check_number("auto_stretch.min_reach", self.min_reach, 0, 1)
-        check_number("auto_stretch.min_extension", self.min_extension, 0, 1)
+        check_number("auto_stretch.min_rise", self.min_rise, 0, 1)
+        check_number("auto_stretch.min_angle", self.min_angle, 0, 180)
+        check_number("auto_stretch.min_leg_angle", self.min_leg_angle, 0, 180)
         check_number("auto_stretch.window", self.window, 0.05, 5)
         if isinstance(self.ease_in, list):
             object.__setattr__(self, "ease_in", tuple(self.ease_in))
         StretchSpec(limb="check", start=0, end=1, scale=self.arm, axes=self.axes, ease_in=self.ease_in)
 
 
-def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float,
-                 config: AutoStretchConfig) -> list[StretchSpec]:
+def weigh_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float,
+                  config: AutoStretchConfig) -> list[Candidate]:
+    """Every reach peak of the arms and legs in ``world_pos (F, J, 3)`` weighed as a strike (`strike_candidates`),
+    the legs' steps found as the contacts stage finds them."""
+    from .contacts import limb_contacts
+
+    steps = limb_contacts(skeleton, world_pos, frame_time, limbs) if len(world_pos) >= 8 else {}
+    return strike_candidates(world_pos, skeleton, limbs, frame_time, min_reach=config.min_reach,
+                             min_rise=config.min_rise, min_angle=config.min_angle,
+                             min_leg_angle=config.min_leg_angle, window=config.window, steps=steps)
+
+
+def find_strikes(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float, config: AutoStretchConfig,
+                 candidates: list[Candidate] | None = None) -> list[StretchSpec]:
     """Stretch events for the strikes in ``world_pos (F, J, 3)`` (frame numbers relative to it).
 
-    The scale of each is the style's (``config.arm`` or ``config.leg``): the
-    limb's reach at the strike's end in limb lengths; `strike_scale` turns it
-    into a factor on whatever reach the motion being stretched has there.
+    candidates : `weigh_strikes`'s, when already weighed. The scale of each event is the
+    style's (``config.arm`` or ``config.leg``): the limb's reach at the strike's end in limb
+    lengths; `strike_scale` turns it into a factor on whatever reach the motion being
+    stretched has there. Of strikes of one limb that overlap, the one reaching furthest.
     """
-    from ..core.timing import gaussian_average
-
-    frames = world_pos.shape[0]
-    if frames < 8:
-        return []
-    specs = []
-    window = max(3, int(round(config.window / frame_time)))
+    if candidates is None:
+        candidates = weigh_strikes(world_pos, skeleton, limbs, frame_time, config)
     release = int(round(parse_duration(DEFAULT_RELEASE, frame_time)))
-    for name, limb in limbs.items():
-        if not name.endswith(("_arm", "_leg")):
-            continue
-        full = limb_length(skeleton, limb)
-        if full <= 0:
-            continue
-        reach = np.linalg.norm(world_pos[:, limb.end] - world_pos[:, limb.base], axis=-1) / full
-        reach = gaussian_average(reach, 0.015 / frame_time)  # capture jitter is not a strike
-        rate = np.gradient(reach, frame_time)
-        flight = gaussian_average(world_pos[:, limb.end] - world_pos[:, 0], 0.015 / frame_time)
-        speed = np.linalg.norm(np.gradient(flight, frame_time, axis=0), axis=-1) / full
-        # Peaks: the greatest reach of their own neighbourhood (a quarter of the window either side).
-        near = max(1, window // 4)
-        padded = np.pad(reach, near, mode="edge")
-        highest = np.lib.stride_tricks.sliding_window_view(padded, 2 * near + 1).max(axis=-1)
-        peaks = np.flatnonzero((reach >= highest) & (reach >= config.min_reach))
-        if not len(peaks):
-            continue
-        peaks = peaks[np.concatenate([[True], np.diff(peaks) > near])]  # a flat top counts once
-        candidates = []
-        for peak in peaks:
-            lo = max(0, peak - window)
-            start = lo + int(np.argmin(reach[lo : peak + 1]))
-            fastest = float(rate[start : peak + 1].max(initial=0.0))
-            rise = reach[peak] - reach[start]
-            unfolds = rise >= config.min_extension and fastest >= config.min_rate
-            swings = rise >= 0.5 * config.min_extension and speed[start : peak + 1].max() >= config.min_speed
-            if not (unfolds or swings):
-                continue
-            start += int(np.argmax(rate[start : peak + 1] >= 0.25 * fastest))  # where the extension gets going
-            start = max(start - 1, lo)
-            if peak - start >= 3:
-                candidates.append((fastest, int(start), int(peak)))
+    specs = []
+    for name in limbs:
+        taken = sorted((c for c in candidates if c.limb == name and c.taken), key=lambda c: (-c.reach, c.arrive))
         chosen: list[tuple[int, int]] = []
-        for _, start, end in sorted(candidates, reverse=True):  # the fastest first
-            if not overlapping((start - 1, end + 1), chosen):
-                chosen.append((start, end))
+        for strike in taken:
+            if not overlapping((strike.start - 1, strike.arrive + 1), chosen):
+                chosen.append((strike.start, strike.arrive))
         chosen.sort()
         scale = config.arm if name.endswith("_arm") else config.leg
         for k, (start, end) in enumerate(chosen):
             gap = chosen[k + 1][0] - end - 1 if k + 1 < len(chosen) else release
             specs.append(StretchSpec(limb=name, start=start, end=end, scale=scale, axes=config.axes,
-                                     ease_in=config.ease_in, release=f"{min(release, gap)}f"))
+                                     ease_in=config.ease_in, release=f"{max(0, min(release, gap))}f"))
     return specs
+
+
+def nothing_found(candidates: list[Candidate], frame_time: float, first: int = 0) -> str:
+    """The note for a clip with no strike found: the strongest candidate and why it was not taken."""
+    if not candidates:
+        return (f"auto-stretch: no strike found: no arm or leg comes within {CANDIDATE_REACH:g} of its full reach "
+                "at a peak")
+    strongest = max(candidates, key=lambda c: c.strength())
+    return (f"auto-stretch: no strike found; the strongest candidate, {strongest.describe(frame_time, first)}, "
+            f"was not taken: {strongest.why}")
 
 
 def strike_scale(spec: StretchSpec, world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float) -> StretchSpec:
@@ -636,12 +623,16 @@ def stretch_stage(state: State, plan: StretchPlan) -> State:
     reaches: dict[tuple[str, int, int], float] = {}
     if plan.auto.enabled:
         # Strikes are found in the captured motion, not in its exaggeration.
-        found = find_strikes(state.captured_pos[first:], motion.skeleton, state.limbs, motion.frame_time, plan.auto)
+        captured = state.captured_pos[first:]
+        weighed = weigh_strikes(captured, motion.skeleton, state.limbs, motion.frame_time, plan.auto)
+        found = find_strikes(captured, motion.skeleton, state.limbs, motion.frame_time, plan.auto, weighed)
         styled = [spec.shifted(first) for spec in found]
         found = [strike_scale(spec, state.positions, motion.skeleton, state.limbs, motion.frame_time)
                  for spec in styled]
         notes += [f"auto-stretch: {s.limb} frames {s.start}-{s.end} to {style.scale:g} limb lengths (x{s.scale:.3g})"
                   for s, style in zip(found, styled)]
+        if not found:
+            notes.append(nothing_found(weighed, motion.frame_time, first))
         reaches = {(s.limb, int(s.start), int(s.end)): style.scale for s, style in zip(found, styled)}
         span = functools.partial(StretchSpec.span, frame_time=motion.frame_time, num_frames=motion.num_frames)
         for spec in found:  # the user's own events win over found ones
