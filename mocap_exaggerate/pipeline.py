@@ -78,7 +78,7 @@ def _block(name: str) -> Callable[[PipelineConfig], Any]:
 STAGES: tuple[Stage, ...] = (
     Stage("extrapolate", extrapolate_stage, _block("extrapolate")),
     Stage("correct", correct_stage, _block("correct")),
-    Stage("stretch", stretch_stage, lambda c: StretchPlan(c.stretch, c.auto_stretch)),
+    Stage("stretch", stretch_stage, lambda c: StretchPlan(c.stretch, c.auto_stretch, c.contacts)),
     Stage("subjoints", subjoints_stage, _block("subjoints")),
     Stage("springs", springs_stage, lambda c: c.springs if c.springs.enabled and c.springs.blend > 0 else None),
     Stage("constraints", constraints_stage, lambda c: ConstraintPlan(c.contacts, c.target)),
@@ -105,6 +105,9 @@ class PipelineResult:
     correct_report : CorrectReport or None when correction was off
     speed_report : how much of the exaggeration the speed limit took (`SpeedLimitReport`); None
         without extrapolation or a limit
+    notes : what the user should hear about with ``-v`` (rest frames, strikes found, the speed limit)
+    warnings : what the user must hear about: a promise the stages could not keep (a stretch's length
+        the floor held back)
     preserve_volume : ``output.preserve_volume``: the skinned outputs (GLB, previews) scale
         each joint by `mocap_exaggerate.jobs.outputs.output_thickness`
     """
@@ -122,6 +125,7 @@ class PipelineResult:
     max_link_stretch: float = 1.0
     substeps: int = 0
     notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
     stretch: StretchResult | None = None
     stages: list[str] = field(default_factory=list)
     constraints: dict | None = None
@@ -198,6 +202,7 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
         max_link_stretch=max_link_stretch(state.positions, skeleton.parents, skeleton.link_lengths()),
         substeps=state.substeps,
         notes=list(state.notes),
+        warnings=list(state.warnings),
         stretch=state.stretch,
         stages=ran,
         constraints=state.constraints,

@@ -333,9 +333,8 @@ def test_a_stretch_keeps_its_length_with_the_springs_on():
     limbs = find_limbs(motion.skeleton)
     base, end = limbs["right_arm"].base, limbs["right_arm"].end
     config = load_preset("cartoon")
-    plain = replace(config, springs=replace(config.springs, enabled=False), contacts=replace(config.contacts, enabled=False),
-                    subjoints=replace(config.subjoints, enabled=False), output=replace(config.output, skeleton="original"))
-    before = run(motion, plain).world_positions[1251]
+    # S is against the captured arm (issue 25), whatever the exaggeration and the springs did to it.
+    before = motion.world_positions()[1251]
     length = np.linalg.norm(before[end] - before[base])
     for scale in (1.5, 2.0, 2.5):
         stretched = replace(config, stretch=(StretchSpec(limb="right_arm", start=1230, end=1251, scale=scale),))

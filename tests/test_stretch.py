@@ -1,6 +1,8 @@
 """The Stretch-Engine pass: exact limb lengths, identities, easing, pivots, the thesis's punch."""
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -24,7 +26,7 @@ from mocap_exaggerate.stages.stretch import (
 )
 from mocap_exaggerate_cli.main import cli
 
-from .helpers import shared
+from .helpers import SHARED_BVH, shared
 
 AXES = ["x", "y", "z", "xy", "xz", "yz", "xyz"]
 
@@ -331,3 +333,76 @@ def test_a_finder_asked_for_full_reach_on_a_walk_finds_nothing_and_does_not_cras
     config = AutoStretchConfig(enabled=True, min_reach=1.0)
     assert find_strikes(motion.world_positions(), motion.skeleton, find_limbs(motion.skeleton), motion.frame_time,
                         config) == []
+
+
+def _limb_ratio(motion, result, limb_name, frame):
+    """The limb's base-to-end distance in the output at ``frame`` over the captured one."""
+    limb = find_limbs(motion.skeleton)[limb_name]
+    out = result.world_positions[:, result.original_index]
+    captured = motion.world_positions()
+    return (np.linalg.norm(out[frame, limb.end] - out[frame, limb.base])
+            / np.linalg.norm(captured[frame, limb.end] - captured[frame, limb.base]))
+
+
+@pytest.mark.parametrize("clip, spec", [
+    ("assimp_boxing_toes.bvh", "right_arm:1230-1251:2.5"),  # 2.73x before (the exaggeration's 1.09 on top)
+    ("makehuman_zombie_walk_keyframed.bvh", "left_arm:10-24:1.8"),  # a Z-up rig
+    ("cmu_12_01_walk.bvh", "left_arm:100-140:0.6"),  # a squash
+])
+@pytest.mark.parametrize("preset", ["cartoon", "looney"])
+def test_s_means_the_captured_limb_in_the_final_output(clip, spec, preset):
+    # Issue 25, part 2: springs, contacts and the floor on, as a user runs it.
+    motion, _ = read_bvh(shared(clip))
+    asked = parse_stretch(spec)
+    result = run(motion, resolve_config(preset, None, {"stretch": [asked.to_dict()]}))
+    assert _limb_ratio(motion, result, asked.limb, int(asked.end)) == pytest.approx(asked.scale, rel=0.01)
+    (event,) = result.stretch.events
+    assert event.captured == asked.scale and event.to_dict()["captured"] == asked.scale
+
+
+def _planted_runs_kept(motion, result) -> float:
+    """The farthest (in heights) any planted foot is from where it was captured, over its contacts."""
+    out = result.world_positions[:, result.original_index]
+    captured = motion.world_positions()
+    worst = 0.0
+    for name, runs in result.constraints["contacts"].items():
+        joint = motion.skeleton.index(name)
+        for first, last in runs:
+            worst = max(worst, np.linalg.norm(out[first:last + 1, joint] - captured[first:last + 1, joint],
+                                              axis=-1).max())
+    return worst / motion.skeleton.height()
+
+
+@pytest.mark.parametrize("clip, spec, higher", [
+    ("cmu_10_01_soccer_kick_daz.bvh", "right_leg:200-260:2", True),  # threw the standing foot 0.99 heights
+    ("cmu_12_01_walk.bvh", "left_leg:100-140:1.5", True),  # the floor held it to 1.33x
+    ("cmu_02_04_jump_balance_daz.bvh", "left_leg:20-60:0.5", False),  # a squashed support leg: the body came down
+])
+def test_a_planted_foot_stays_and_the_body_moves_instead(clip, spec, higher):
+    # Issue 25, part 3.
+    motion, _ = read_bvh(shared(clip) if "wide" not in clip and (SHARED_BVH / clip).exists()
+                         else shared("wide/" + clip))
+    asked = parse_stretch(spec)
+    config = resolve_config("looney", None, {"stretch": [asked.to_dict()]})
+    result = run(motion, config)
+    plain = run(motion, resolve_config("looney", None, {}))
+    key = int(asked.end)
+    assert _limb_ratio(motion, result, asked.limb, key) == pytest.approx(asked.scale, rel=0.01)
+    assert _planted_runs_kept(motion, result) < 1e-6  # both feet, as captured, on every planted frame
+    (event,) = result.stretch.events
+    assert event.moved_body
+    root = result.world_positions[key, 0, 1] - plain.world_positions[key, 0, 1]
+    assert (root > 0.05 * motion.skeleton.height()) if higher else (root < -0.05 * motion.skeleton.height())
+    assert not result.warnings
+
+
+def test_a_stretch_the_floor_holds_back_is_said_in_one_line(tmp_path):
+    # A kick stretched 2x at 45 degrees from straight down would go through the floor: the floor wins, and says so.
+    done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "exaggerate",
+                           str(shared("cmu_10_01_soccer_kick_daz.bvh")), "-o", str(tmp_path), "--no-glb",
+                           "--stretch", "right_leg:580-604:2"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    said = [line for line in done.stderr.splitlines() if "stretch right_leg at frame 604" in line]
+    assert len(said) == 1 and said[0].startswith("WARNING: ") and "of the length asked" in said[0]
+    manifest = json.loads((tmp_path / "cmu_10_01_soccer_kick_daz.json").read_text())
+    assert any("stretch right_leg at frame 604" in w for w in manifest["warnings"])

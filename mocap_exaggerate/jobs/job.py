@@ -284,6 +284,7 @@ def convert(
         warnings += [unlikely] if unlikely else []
     skin, binding = character.bound_to(motion, label) if glb else (None, None)  # a skin that will not bind costs nothing
     result = run(motion, config, paths=paths)
+    warnings += result.warnings
     timings.update(result.timings)
     for target in targets.values():
         remove_stale_temporaries(target, keep=inputs)  # what a killed earlier run of these outputs left

@@ -552,6 +552,8 @@ def laplacian_deform(points: np.ndarray, end: np.ndarray, rest: np.ndarray) -> n
 SOFT_REACH = 0.1
 #: Reach (base to end over the bones' length) below which a two-bone chain folds as rubber, easing in from the second.
 FOLDED = (0.2, 0.45)
+#: A stretch's length missed by more than this share is said (a warning: stderr and the manifest).
+SHORTFALL = 0.01
 #: Frames (a Gaussian's sigma) over which a two-bone chain's middle joint's move is eased in time.
 HINGE_EASE = 2.0
 
@@ -921,4 +923,10 @@ def constraints_stage(state: State, plan: ConstraintPlan) -> State:
     if result.ground is not None:
         report["floor"] = {"axis": "XYZ"[result.ground.axis], "up": "+" if result.ground.sign > 0 else "-",
                            "height": round(result.ground.sign * result.ground.floor, 6)}
-    return replace(state, sub_positions=out, pins=Pins(result.pin_joints, weights), constraints=report)
+    # A length a stretch promised and did not get is said, not left in the manifest to be found.
+    warnings = state.warnings + tuple(
+        f"stretch {key['limb']} at frame {key['frame'] + first}: the limb reaches {key['ratio']:.1%} of the length "
+        f"asked; " + ("the floor or a planted foot held it back" if key["ratio"] < 1 else "a planted foot pulled it")
+        for key in result.keys if abs(key["ratio"] - 1.0) > SHORTFALL)
+    return replace(state, sub_positions=out, pins=Pins(result.pin_joints, weights), constraints=report,
+                   warnings=warnings)

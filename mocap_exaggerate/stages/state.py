@@ -86,7 +86,8 @@ class State:
     limbs : limb name -> `Limb`, found on the skeleton (the config's ``[limbs]`` win)
     positions : (F, J, 3) float64 working positions of the original joints
     paths : limb -> (frames, points), hand-edited end-effector paths, or None
-    notes : things the user should hear about, in the order they happened
+    notes : things the user should hear about, in the order they happened (``-v``)
+    warnings : things the user must hear about (said without ``-v``): a promise the stages could not keep
 
     Added by the stages (None until a stage adds them):
 
@@ -113,6 +114,7 @@ class State:
     positions: np.ndarray
     paths: dict | None = None
     notes: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
     speed_limit: float = 0.0
     speed_report: SpeedLimitReport | None = None
     correct_report: CorrectReport | None = None

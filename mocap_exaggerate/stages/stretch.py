@@ -35,6 +35,7 @@ from ..core.timing import parse_duration, parse_frame
 from .state import StretchKey
 
 if TYPE_CHECKING:
+    from .contacts import ContactConfig
     from .state import State
 
 __all__ = [
@@ -55,6 +56,7 @@ __all__ = [
     "find_strikes",
     "weigh_strikes",
     "strike_scale",
+    "captured_scale",
     "overlapping",
 ]
 
@@ -302,6 +304,9 @@ class StretchEvent:
     effective_scale : the scale S' the path was blended toward (the thesis's section 4.3)
     axes_relaxed : the path could not squash on the axes asked and was squashed along the limb
     reach : for a strike found, the reach it ends at in limb lengths (its style); None for declared ones
+    captured : for a declared stretch, the S asked: the limb's length at the key frame over its captured
+        length there (``scale`` is the factor that took on the exaggerated limb); None for found ones
+    moved_body : the limb's end was planted somewhere in the event: the body moved instead of it
     """
 
     limb: str
@@ -312,6 +317,8 @@ class StretchEvent:
     effective_scale: float
     axes_relaxed: bool
     reach: float | None = None
+    captured: float | None = None
+    moved_body: bool = False
 
     def to_dict(self) -> dict:
         """The event as the manifest lists it."""
@@ -319,6 +326,10 @@ class StretchEvent:
                "pivot": self.pivot, "effective_scale": self.effective_scale, "axes_relaxed": self.axes_relaxed}
         if self.reach is not None:
             out["reach"] = self.reach
+        if self.captured is not None:
+            out["captured"] = self.captured
+        if self.moved_body:
+            out["moved_body"] = True
         return out
 
 
@@ -372,12 +383,18 @@ def apply_stretches(
     frame_time: float,
     *,
     paths: dict | None = None,
+    planted: dict[str, tuple] | None = None,
 ) -> StretchResult:
     """Apply every stretch spec to ``world_pos (F, J, 3)``; returns a StretchResult.
 
     ``limbs`` maps limb names to `Limb`s (``find_limbs``). ``paths`` maps a
     limb name to ``(frames, positions)`` edited by hand (a trails file): that
     path replaces the computed one for the event on that limb covering those frames.
+    ``planted`` maps a limb name to ``(weights (F,), stand (F, 3) or None)``:
+    weights 1 where its end is planted (eased in and out), ``stand`` where it
+    stands then (None: where it is). There the end stays and the base moves along
+    the line from it to the length asked, the body with it (a stretched support
+    leg lifts the hips, a squashed one lowers them).
     """
     world_pos = np.array(world_pos, dtype=np.float64)
     frames_total = world_pos.shape[0]
@@ -421,9 +438,23 @@ def apply_stretches(
         if spec.pivot == "end" and lo < first:
             target[lo:first] += release_curve(shift[::-1], first - lo)[::-1]
         span = slice(lo, hi + 1)
+        held = (planted or {}).get(spec.limb)
+        moved_body = held is not None and bool(np.any(held[0][span] > 0))
+        if moved_body:
+            # Planted: the end stands where the contacts will put it and the base moves along the line
+            # from it to the length asked, the body with it (the least move that keeps both).
+            weight = held[0][span][:, None]
+            stand = held[1][span] if held[1] is not None else world_pos[span, end]
+            length = np.linalg.norm(target[span] - world_pos[span, base], axis=-1, keepdims=True)
+            away = world_pos[span, base] - stand
+            away /= np.maximum(np.linalg.norm(away, axis=-1, keepdims=True), 1e-12)
+            shift = weight * (stand + length * away - world_pos[span, base])
+            world_pos[span, _body_of(skeleton, base)] += shift[:, None]
+            target[span] = (1.0 - weight) * target[span] + weight * stand
         _follow(world_pos, skeleton, limb, target, span)
         events.append(StretchEvent(limb=spec.limb, frames=(first, last), scale=float(spec.scale), axes=spec.axes,
-                                   pivot=spec.pivot, effective_scale=round(float(effective), 6), axes_relaxed=not exact))
+                                   pivot=spec.pivot, effective_scale=round(float(effective), 6), axes_relaxed=not exact,
+                                   moved_body=moved_body))
         trails.append({
             "limb": spec.limb, "joint": skeleton.names[end], "frames": list(range(lo, hi + 1)),
             "original": before[span, end].round(6).tolist(), "exaggerated": world_pos[span, end].round(6).tolist(),
@@ -435,6 +466,12 @@ def apply_stretches(
     factors[:, 1:] = np.divide(lengths_after, lengths_before, out=np.ones_like(lengths_after),
                                where=lengths_before > 1e-12)
     return StretchResult(world_pos, factors, events, trails)
+
+
+def _body_of(skeleton, base: int) -> np.ndarray:
+    """The joints that move with the body when a limb's end stays put: all but those below ``base``."""
+    below = set(skeleton.descendants(base)[1:])
+    return np.array([j for j in range(skeleton.num_joints) if j not in below], dtype=np.int64)
 
 
 def _follow(world_pos: np.ndarray, skeleton, limb, target: np.ndarray, span: slice) -> None:
@@ -581,6 +618,27 @@ def nothing_found(candidates: list[Candidate], frame_time: float, first: int = 0
             f"was not taken: {strongest.why}")
 
 
+def captured_scale(spec: StretchSpec, captured: np.ndarray, world_pos: np.ndarray, skeleton, limbs: dict,
+                   frame_time: float) -> StretchSpec:
+    """A declared stretch with its S (times the captured limb at the key frame) turned into a factor on ``world_pos``.
+
+    The extrapolation and the correction have already changed the limb: S on top of them made an arm
+    2.73x its captured length for S = 2.5. The factor that gives S times the captured length is
+    ``S * captured / exaggerated`` at the key frame (the last, or the first with pivot end), at most
+    `MAX_SCALE`. A spec naming no limb of the skeleton is left for `apply_stretches` to refuse.
+    """
+    limb = limbs.get(spec.limb)
+    if limb is None:
+        return spec
+    first, last = spec.frames(frame_time, world_pos.shape[0])
+    key = first if spec.pivot == "end" else last
+    was = float(np.linalg.norm(captured[key, limb.end] - captured[key, limb.base]))
+    now = float(np.linalg.norm(world_pos[key, limb.end] - world_pos[key, limb.base]))
+    if was <= 0 or now <= 0:
+        return spec
+    return replace(spec, scale=float(min(MAX_SCALE, spec.scale * was / now)))
+
+
 def strike_scale(spec: StretchSpec, world_pos: np.ndarray, skeleton, limbs: dict, frame_time: float) -> StretchSpec:
     """A found strike with its scale turned from "reach in limb lengths" into a factor on ``world_pos``.
 
@@ -603,10 +661,12 @@ def strike_scale(spec: StretchSpec, world_pos: np.ndarray, skeleton, limbs: dict
 
 
 class StretchPlan(NamedTuple):
-    """The stretch stage's settings: the declared events and the automatic finder's."""
+    """The stretch stage's settings: the declared events, the automatic finder's, and the contacts
+    (a planted foot stays where it stands: the body moves instead)."""
 
     specs: tuple[StretchSpec, ...]
     auto: AutoStretchConfig
+    contacts: ContactConfig | None = None
 
 
 def stretch_stage(state: State, plan: StretchPlan) -> State:
@@ -616,7 +676,13 @@ def stretch_stage(state: State, plan: StretchPlan) -> State:
     (the length each event promised at its final frame). Nothing to do without any of the three.
     """
     motion, first = state.motion, state.first
-    specs = list(plan.specs) + list(specs_for_paths(state.paths or {}, plan.specs))
+    if not plan.specs and not state.paths and not plan.auto.enabled:
+        return state
+    # S means the captured limb: the factor on the exaggerated limb that makes it S times its captured length.
+    declared = [captured_scale(spec, state.captured_pos, state.positions, motion.skeleton, state.limbs,
+                               motion.frame_time) for spec in plan.specs]
+    asked = {(spec.limb, str(spec.start), str(spec.end)): spec.scale for spec in plan.specs}
+    specs = declared + list(specs_for_paths(state.paths or {}, plan.specs))
     if not specs and not plan.auto.enabled:
         return state
     notes = list(state.notes)
@@ -639,7 +705,7 @@ def stretch_stage(state: State, plan: StretchPlan) -> State:
             if not overlapping(span(spec), [span(other) for other in specs if other.limb == spec.limb]):
                 specs.append(spec)
     result = apply_stretches(state.positions, motion.skeleton, state.limbs, tuple(specs), motion.frame_time,
-                             paths=state.paths)
+                             paths=state.paths, planted=_planted(state, plan.contacts, [s.limb for s in specs]))
     positions = result.positions
     positions[:first] = state.positions[:first]
     events, keys = [], []
@@ -647,6 +713,10 @@ def stretch_stage(state: State, plan: StretchPlan) -> State:
         reach = reaches.get((event.limb, *event.frames))
         if reach is not None:  # a found strike: its style is the reach it ends at, in limb lengths
             event = replace(event, reach=reach)
+        spec = next((d for d, o in zip(declared, plan.specs)
+                     if d.limb == event.limb and d.frames(motion.frame_time, motion.num_frames) == event.frames), None)
+        if spec is not None:
+            event = replace(event, captured=float(asked[spec.limb, str(spec.start), str(spec.end)]))
         events.append(event)
         if event.axes_relaxed:
             notes.append(
@@ -660,6 +730,26 @@ def stretch_stage(state: State, plan: StretchPlan) -> State:
             keys.append(StretchKey(event.limb, limb.base, limb.end, frame - first, vectors))
     return replace(state, positions=positions, stretch=replace(result, events=events), stretch_keys=tuple(keys),
                    notes=tuple(notes))
+
+
+def _planted(state: State, contacts: ContactConfig | None, names: list[str]) -> dict[str, tuple]:
+    """Per stretched limb whose end the contacts stage will plant: ``(F,)`` weights, eased as it eases
+    them, and where it will stand (the capture with ``anchor = "captured"``; None: where it is)."""
+    from .contacts import contact_weights, limb_contacts
+
+    if contacts is None or not contacts.enabled or not names:
+        return {}
+    motion, first = state.motion, state.first
+    wanted = {name: limb for name, limb in state.limbs.items() if name in names}
+    runs = limb_contacts(motion.skeleton, state.captured_pos[first:], motion.frame_time, state.limbs, contacts)
+    ramp = parse_duration(contacts.blend, motion.frame_time, what="contacts.blend")
+    out = {}
+    for name, limb in wanted.items():
+        if name in runs and len(runs[name]):
+            weights = np.zeros(motion.num_frames)
+            weights[first:] = contact_weights(runs[name], motion.num_frames - first, ramp)
+            out[name] = (weights, state.captured_pos[:, limb.end] if contacts.anchor == "captured" else None)
+    return out
 
 
 def specs_for_paths(paths: dict, specs: tuple[StretchSpec, ...]) -> tuple[StretchSpec, ...]:
