@@ -6,7 +6,8 @@ Runs every shared clip through each preset and prints, per clip and preset, the 
 twist flips (a written joint turning > 60 degrees in a frame where the capture turns < 30),
 limb stretch along the output skeleton (peak / 95th percentile / share of frames above
 1.5x; arms and legs the worse of the pair), the largest original link stretch, and drift
-(root speed where the captured root stands still, h/s).
+(root speed where the captured root stands still, h/s), frames with a hand, forearm, foot or shin
+inside the body, output and capture (issue 25), and knee and elbow frames bent backwards.
 
 Not a test: run it by hand (``python bench/quality.py``) and quote the figures.
 ``--json`` writes every figure; ``--clips``, ``--presets`` choose what runs; ``--set KEY=VALUE`` lays a
@@ -39,8 +40,9 @@ def measure(path: Path, preset: str, config=None) -> dict:
 def table(preset: str, rows: list[dict]) -> None:
     print(f"\n### {preset}\n")
     print("| clip | jerk p99 ratio | worst jump ratio (joint, frame) | twist flips | arms peak / p95 / >1.5x "
-          "| legs peak / p95 / >1.5x | spine peak | neck peak | links max | drift / captured (h/s) |")
-    print("|---" * 10 + "|")
+          "| legs peak / p95 / >1.5x | spine peak | neck peak | links max | drift / captured (h/s) "
+          "| frames a limb is inside the body / captured | knees, elbows backwards |")
+    print("|---" * 12 + "|")
     for r in rows:
         s = r["stretch"]
 
@@ -55,11 +57,16 @@ def table(preset: str, rows: list[dict]) -> None:
               f"({r['jump_joint']}, {r['jump_frame']}) | {r['flips']} | {limb_pair('left_arm', 'right_arm')} "
               f"| {limb_pair('left_leg', 'right_leg')} | {cell(s.get('spine', {}).get('peak'))} "
               f"| {cell(s.get('neck', {}).get('peak'))} | {r['links']:.2f} "
-              f"| {cell(r['drift'])} / {cell(r['drift_captured'])} |")
+              f"| {cell(r['drift'])} / {cell(r['drift_captured'])} | {r['inside']} / {r['inside_captured']} "
+              f"| {r['backwards']} |")
     worst = max(rows, key=lambda r: r["jerk_ratio"])
     print(f"\nworst jerk ratio {worst['jerk_ratio']:.2f} ({worst['clip']}); worst jump ratio "
           f"{max(r['jump_ratio'] for r in rows):.2f}; twist flips {sum(r['flips'] for r in rows)}; "
           f"torso above a limb on {sum(r['torso_within_limbs'] is False for r in rows)} clip(s); "
+          f"limbs inside the body {sum(r['inside'] for r in rows)} frames (captured "
+          f"{sum(r['inside_captured'] for r in rows)}; more than captured on "
+          f"{sum(r['inside'] > r['inside_captured'] for r in rows)} clip(s)); knees and elbows backwards "
+          f"{sum(r['backwards'] for r in rows)}; "
           f"{sum(r['seconds'] for r in rows):.1f} s of pipeline")
 
 

@@ -51,6 +51,12 @@ def test_presets_read_as_animation_and_keep_their_word(path, preset):
     assert max(limbs) <= LIMBS[preset], (where, q["stretch"])
     assert max(torso) <= TORSO[preset], (where, q["stretch"])
     assert q["torso_within_limbs"], (where, q["stretch"])  # cartoon torsos stretch less than limbs
+    # Issue 25: hands, forearms, feet and shins stay out of the torso, pelvis, head and thighs where
+    # the capture's do (before: more frames inside than captured on 9 of these 12 clips at looney, the
+    # boxer's forearms 433 frames against 0), but for a frame or two where a push fades at a clip's end;
+    # knees and elbows bend the captured way (one leg-frame of the cartwheel at looney is still off).
+    assert q["inside"] <= q["inside_captured"] + 2, (where, q["inside"], q["inside_captured"])
+    assert q["backwards"] <= 1, (where, q["backwards"])
 
 
 @pytest.mark.parametrize("path", [p for p in shared_clip_params() if p.values[0] is None or
@@ -113,6 +119,11 @@ def test_knees_bend_toward_the_toes_as_captured(path):
     assert backwards <= 60, backwards  # measured 41 of 1988 leg-frames
 
 
+#: Known exceptions, measured: the boxer getting up off the canvas at looney, where the body pass lifts
+#: the hips off the folded shins of planted feet (1.95x without it, and 63 frames of shins in the pelvis).
+KNEES_WITHOUT_SUBJOINTS = {("assimp_boxing_toes.bvh", "looney"): 2.3}
+
+
 @pytest.mark.parametrize("preset", ["subtle", "cartoon", "looney"])
 @pytest.mark.parametrize("path", shared_clip_params())
 def test_no_knee_pops_without_subjoints(path, preset):
@@ -124,7 +135,7 @@ def test_no_knee_pops_without_subjoints(path, preset):
     config = load_preset(preset)
     config = replace(config, subjoints=replace(config.subjoints, enabled=False))
     jumps = motion_quality(motion, run(motion, config))
-    if jumps["jump_ratio"] <= 2.0:
+    if jumps["jump_ratio"] <= KNEES_WITHOUT_SUBJOINTS.get((path.name, preset), 2.0):
         return
     free = motion_quality(motion, run(motion, replace(config, contacts=replace(config.contacts, enabled=False))))
     assert jumps["jump_ratio"] <= 1.05 * free["jump_ratio"], (path.name, preset, jumps["jump_joint"],

@@ -19,9 +19,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.rotations import quat_inv, quat_rotate
 from ..core.skeleton import Skeleton
+from ..core.timing import smootherstep
 
-__all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints", "limb_length", "standing_up", "is_helper", "main_child"]
+__all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints", "limb_length", "standing_up", "is_helper", "main_child",
+           "hinge_pole", "offset_from_line"]
 
 LIMB_NAMES = ("left_arm", "right_arm", "left_leg", "right_leg", "spine", "neck")
 
@@ -256,3 +259,32 @@ def torso_joints(skeleton: Skeleton, limbs: dict) -> np.ndarray:
         if name.endswith("_arm"):  # the arm below its shoulder ball: twist and share bones too
             torso -= set(skeleton.descendants(limb.base).tolist()) - {limb.base}
     return np.array(sorted(torso), dtype=np.int64)
+
+
+def offset_from_line(base: np.ndarray, middle: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """(F, 3) the middle joint's offset from the base-to-end line: where the chain bends, and how far."""
+    line = end - base
+    line = line / np.maximum(np.linalg.norm(line, axis=-1), 1e-12)[:, None]
+    away = middle - base
+    return away - np.sum(away * line, axis=-1, keepdims=True) * line
+
+
+def hinge_pole(chain: np.ndarray, base_rotation: np.ndarray) -> np.ndarray | None:
+    """(F, 3) unit: the side a captured two-bone chain bends to (where a knee or elbow points).
+
+    chain : (F, 3, 3) the captured base, middle and end; base_rotation : (F, 4) the base joint's
+    captured world rotation. Where the capture bends clearly it is the capture's own bend; where
+    it runs nearly straight (its bend there is noise) the clip's usual bend in the base joint's
+    frame, turned with it: a knee is a hinge, it bends the same way in its thigh's frame all clip
+    long. None for a chain that never bends.
+    """
+    own = offset_from_line(chain[:, 0], chain[:, 1], chain[:, 2])
+    upper = np.maximum(np.linalg.norm(chain[:, 1] - chain[:, 0], axis=-1), 1e-12)
+    bent = np.linalg.norm(own, axis=-1) / upper
+    local = quat_rotate(quat_inv(base_rotation), own)
+    usual = np.sum(local * bent[:, None], axis=0)  # weighted by how clearly each frame bends
+    if np.linalg.norm(usual) < 1e-9 * len(chain):
+        return None
+    usual = quat_rotate(base_rotation, np.broadcast_to(usual / np.linalg.norm(usual), own.shape))
+    clear = smootherstep((bent - 0.05) / 0.15)[:, None]
+    return clear * own / np.maximum(bent * upper, 1e-12)[:, None] + (1.0 - clear) * usual

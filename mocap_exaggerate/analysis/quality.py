@@ -16,6 +16,10 @@ kept rest frames included, so a pop where the rest pose ends shows):
   ``torso_within_limbs`` whether the spine's and neck's peaks are at most every arm's and
   leg's peak (within 1 % of rest length: a dragged leg that never stretches is not a limb
   the torso must stay under to the last decimal).
+- ``inside``: frames with a hand, forearm, foot or shin inside the body (`mocap_exaggerate.analysis.body`,
+  capsules sized from the capture), ``inside_captured`` the capture's own; ``backwards``: limb-frames with
+  a knee or elbow more than 1 % h on the wrong side of its limb's line (`hinge_pole`) where the captured one
+  bends the right way.
 - ``drift`` (h/s): the mean speed of the root on frames where the captured root moves slower
   than 0.1 h/s for at least 0.5 s (None when there are none), and ``drift_captured``.
 
@@ -31,7 +35,8 @@ import numpy as np
 
 from ..core.motion import Motion
 from ..core.rotations import quat_angle
-from .limbs import find_limbs
+from .body import inside_body
+from .limbs import find_limbs, hinge_pole
 
 __all__ = ["motion_quality", "turn_degrees", "still_frames", "STRETCHED"]
 
@@ -121,6 +126,19 @@ def motion_quality(motion: Motion, result) -> dict:
     def drift(p):
         return float((np.linalg.norm(np.gradient(p, dt, axis=0), axis=-1)[still] / h).mean()) if still.any() else None
 
+    limbs = find_limbs(skeleton)
+    inside = inside_body(limbs, out, cap)
+    inside_captured = inside_body(limbs, cap)
+    backwards = 0
+    for name in ("left_arm", "right_arm", "left_leg", "right_leg"):
+        limb = limbs.get(name)
+        if limb is None or len(limb.joints) != 3:
+            continue
+        pole = hinge_pole(cap[:, list(limb.joints)], motion.world_rotations()[:, limb.base])
+        if pole is not None:
+            backwards += int(np.sum((_bend_along(out, limb.joints, pole) < -0.01 * h)
+                                    & (_bend_along(cap, limb.joints, pole) > 0)))
+
     limb_peaks = [v["peak"] for k, v in stretch.items() if k.endswith(("_arm", "_leg"))]
     torso_peaks = [v["peak"] for k, v in stretch.items() if k in ("spine", "neck")]
     return {
@@ -130,7 +148,20 @@ def motion_quality(motion: Motion, result) -> dict:
         "flips": int(flips.sum()), "stretch": stretch, "links": float(links.max()) if links.size else 1.0,
         "torso_within_limbs": (max(torso_peaks) <= min(limb_peaks) + 0.01) if torso_peaks and limb_peaks else None,
         "drift": drift(out_all[:, root]), "drift_captured": drift(cap[:, 0]),
+        "inside": int(inside.sum()), "inside_captured": int(inside_captured.sum()), "backwards": backwards,
     }
+
+
+def _bend_along(positions: np.ndarray, joints, pole: np.ndarray) -> np.ndarray:
+    """(F,) how far a limb's middle joint is off its base-to-end line toward ``pole`` (negative: the other way)."""
+    base, middle, end = (positions[:, j] for j in joints)
+    line = end - base
+    line = line / np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
+    offset = middle - base
+    offset = offset - np.sum(offset * line, axis=-1, keepdims=True) * line
+    side = pole - np.sum(pole * line, axis=-1, keepdims=True) * line
+    side = side / np.maximum(np.linalg.norm(side, axis=-1, keepdims=True), 1e-12)
+    return np.sum(offset * side, axis=-1)
 
 
 def face_stretch(skin, bind: np.ndarray, rotations: np.ndarray, positions: np.ndarray, joint_index: np.ndarray,

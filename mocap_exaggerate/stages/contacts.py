@@ -40,12 +40,13 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from ..analysis.branches import incoming_joint, minor_branches, rider_joints, rubber_groups
-from ..analysis.limbs import Limb
+from ..analysis.limbs import Limb, hinge_pole, offset_from_line
 from ..core.errors import ConfigError, check_choice, check_flag, check_number
 from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
 from ..core.timing import check_duration, gaussian_average, parse_duration, parse_frame, smootherstep, spread_max
+from .collide import keep_out, unbend_hinges
 from .state import Pins
 from .subjoints import even_out
 
@@ -71,7 +72,6 @@ __all__ = [
     "laplacian_deform",
     "two_bone_ik",
     "limb_contacts",
-    "hinge_pole",
     "soft_floor",
     "smootherstep",
 ]
@@ -114,10 +114,14 @@ class ContactConfig:
     blend: str | float = "0.15s"
     floor: bool = setting(True, flag=Flag(
         "--floor/--no-floor", "Keep every joint above the captured floor (with --contacts auto)."))
+    collide: bool = setting(True, flag=Flag(
+        "--collide/--no-collide", "Push hands, forearms, feet and shins out of the torso, pelvis, head and thighs "
+        "where the captured ones stay out, and bend knees and elbows the captured way (with --contacts auto)."))
 
     def __post_init__(self) -> None:
         check_flag("contacts.enabled", self.enabled)
         check_flag("contacts.floor", self.floor)
+        check_flag("contacts.collide", self.collide)
         if isinstance(self.joints, str) or not all(isinstance(j, str) for j in self.joints):
             raise ConfigError(f"contacts.joints must be a list of names (feet, hands, limbs or joints), got {self.joints!r}")
         object.__setattr__(self, "joints", tuple(self.joints))
@@ -582,7 +586,7 @@ def two_bone_ik(base: np.ndarray, middle: np.ndarray, end: np.ndarray, target: n
     """
     upper = np.linalg.norm(middle - base, axis=-1)
     lower = np.linalg.norm(end - middle, axis=-1)
-    own = _offset_from_line(base, middle, end)
+    own = offset_from_line(base, middle, end)
     if pole is not None:  # the pole decides the side where the chain's own bend is under 5-20 % of its upper bone
         clear = smootherstep((np.linalg.norm(own, axis=-1) / np.maximum(upper, 1e-12) - 0.05) / 0.15)
         own = own + (1.0 - clear)[:, None] * 0.2 * upper[:, None] * pole
@@ -631,35 +635,6 @@ def _solve_middle(base, upper, lower, target, side, soft) -> np.ndarray:
     return base + scale[:, None] * (along[:, None] * direction + height[:, None] * side)
 
 
-def _offset_from_line(base: np.ndarray, middle: np.ndarray, end: np.ndarray) -> np.ndarray:
-    """(F, 3) the middle joint's offset from the base-to-end line: where the chain bends, and how far."""
-    line = end - base
-    line = line / np.maximum(np.linalg.norm(line, axis=-1), 1e-12)[:, None]
-    away = middle - base
-    return away - np.sum(away * line, axis=-1, keepdims=True) * line
-
-
-def hinge_pole(chain: np.ndarray, base_rotation: np.ndarray) -> np.ndarray | None:
-    """(F, 3) unit: the side a captured two-bone chain bends to (where a knee or elbow points).
-
-    chain : (F, 3, 3) the captured base, middle and end; base_rotation : (F, 4) the base joint's
-    captured world rotation. Where the capture bends clearly it is the capture's own bend; where
-    it runs nearly straight (its bend there is noise) the clip's usual bend in the base joint's
-    frame, turned with it: a knee is a hinge, it bends the same way in its thigh's frame all clip
-    long. None for a chain that never bends.
-    """
-    own = _offset_from_line(chain[:, 0], chain[:, 1], chain[:, 2])
-    upper = np.maximum(np.linalg.norm(chain[:, 1] - chain[:, 0], axis=-1), 1e-12)
-    bent = np.linalg.norm(own, axis=-1) / upper
-    local = quat_rotate(quat_inv(base_rotation), own)
-    usual = np.sum(local * bent[:, None], axis=0)  # weighted by how clearly each frame bends
-    if np.linalg.norm(usual) < 1e-9 * len(chain):
-        return None
-    usual = quat_rotate(base_rotation, np.broadcast_to(usual / np.linalg.norm(usual), own.shape))
-    clear = smootherstep((bent - 0.05) / 0.15)[:, None]
-    return clear * own / np.maximum(bent * upper, 1e-12)[:, None] + (1.0 - clear) * usual
-
-
 # ---------------------------------------------------------------------------- the block
 
 
@@ -671,6 +646,8 @@ class ConstraintResult(NamedTuple):
     contacts : joint name -> inclusive (start, end) frame ranges found
     ground : the up axis and floor used (None when contacts were off)
     keys : per stretch key, the length reached over the length promised
+    body : frames on which each part was pushed out of the body (``pushed``) and each limb's middle
+        joint brought back from bending the wrong way (``unbent``); empty with ``collide`` off
     """
 
     positions: np.ndarray
@@ -679,6 +656,7 @@ class ConstraintResult(NamedTuple):
     contacts: dict[str, list[list[int]]]
     ground: Ground | None
     keys: list[dict]
+    body: dict[str, dict[str, int]] = {}
 
 
 def sub_chain(hierarchy, chain: tuple[int, ...]) -> np.ndarray:
@@ -758,6 +736,7 @@ def constrain(
             g = goal(joint)
             g += weight[:, None] * (target - g)
             pins[joint] = weight
+    asked: dict[int, np.ndarray] = {}  # ends a target or a stretch key puts somewhere: the body pass leaves them
     for spec, frame in targets:
         for joint in resolve_effector(spec.joint, skeleton, limbs, effectors, f"target {spec.joint}@{spec.frame}"):
             window = parse_duration(spec.window, frame_time, what=f"target {spec.joint}: window")
@@ -765,18 +744,21 @@ def constrain(
             point = captured_pos[frame, joint] if spec.position is None else np.asarray(spec.position)
             g = goal(joint)
             g += weight[:, None] * (point - g)
+            asked[joint] = np.maximum(asked.get(joint, 0.0), weight)
     for key in keys:
         if key.end not in effectors:
             continue
         weight = contact_weights(np.array([[key.frame, key.frame]]), frames, ramp)
         g = goal(key.end)
         g += weight[:, None] * (out[:, original[key.base]] + key.vectors - g)
+        asked[key.end] = np.maximum(asked.get(key.end, 0.0), weight)
     for joint, g in goals.items():
         _move_end(out, hierarchy, effectors[joint], g, rest, captured_pos, captured_rot)
 
-    if config.enabled and config.floor:
-        margin = 0.005 * ground.height
+    def lift_ends() -> None:
+        """Lift each end effector (and its toes) off the floor, its chain bending to follow."""
         up = ground.up()
+        margin = 0.005 * ground.height
         for joint, effector in effectors.items():
             # Lifting the end turns it (its incoming link moves), which moves its toes: a few rounds.
             for _ in range(4):
@@ -789,6 +771,40 @@ def constrain(
                 lift = _spread_lift(lift, ramp, pins.get(joint))
                 _move_end(out, hierarchy, effector, out[:, original[joint]] + lift[:, None] * up, rest,
                           captured_pos, captured_rot)
+
+    body: dict[str, dict[str, int]] = {}
+    floor = config.enabled and config.floor
+    if config.enabled and config.collide:
+        # Knees and elbows the captured way, then the limbs out of the body; the floor has the last say, and
+        # a hand lifted off it (a scoop) can fold into the body again: out of the body once more, then the floor.
+        poles = {}
+        for name in ("left_arm", "right_arm", "left_leg", "right_leg"):
+            limb = limbs.get(name)
+            if limb is not None and len(limb.joints) == 3 and limb.end in effectors:
+                pole = hinge_pole(captured_pos[:, list(limb.joints)], captured_rot[:, limb.joints[0]])
+                if pole is not None:
+                    poles[name] = pole
+        def move(points: np.ndarray, effector: Effector, goal: np.ndarray) -> None:
+            _move_end(points, hierarchy, effector, goal, rest, captured_pos, captured_rot)
+
+        def chain_of(chain: tuple[int, ...]) -> np.ndarray:
+            return sub_chain(hierarchy, chain)
+
+        body["unbent"], body["pushed"] = {}, {}
+        for _ in range(2 if floor else 1):
+            for kind, done in (("unbent", unbend_hinges(out, hierarchy, limbs, poles, captured_pos, chain_of)),
+                               ("pushed", keep_out(out, hierarchy, limbs, effectors, captured_pos, ramp, pins, move,
+                                                  chain_of, asked=asked))):
+                for name, count in done.items():
+                    body[kind][name] = max(body[kind].get(name, 0), count)
+            if floor:
+                lift_ends()
+        unbend_hinges(out, hierarchy, limbs, poles, captured_pos, chain_of)  # what the floor's lifts bent back
+    elif floor:
+        lift_ends()
+
+    if floor:
+        margin = 0.005 * ground.height
         moving = np.flatnonzero(~hierarchy.rigid[hierarchy.link_child])
         heights = ground.heights(out[:, moving])
         held = np.zeros(heights.shape)
@@ -805,7 +821,7 @@ def constrain(
                      "ratio": round(float(reached / promised), 6) if promised > 0 else 1.0})
     pin_joints = np.array(sorted(pins), dtype=np.int64)
     pin_weights = np.stack([pins[j] for j in pin_joints], axis=1) if len(pin_joints) else np.zeros((frames, 0))
-    return ConstraintResult(out, pin_joints, pin_weights, found, ground, held)
+    return ConstraintResult(out, pin_joints, pin_weights, found, ground, held, body)
 
 
 def _spread_lift(lift: np.ndarray, ramp: float, pinned: np.ndarray | None) -> np.ndarray:
@@ -919,7 +935,8 @@ def constraints_stage(state: State, plan: ConstraintPlan) -> State:
     contacts = {name: [[int(a) + first, int(b) + first] for a, b in runs] for name, runs in result.contacts.items()}
     report = {"contacts": contacts, "anchor": plan.contacts.anchor if plan.contacts.enabled else None,
               "targets": [{**spec.to_dict(), "frame": frame + first} for spec, frame in targets],
-              "stretch_keys": [{**key, "frame": key["frame"] + first} for key in result.keys]}
+              "stretch_keys": [{**key, "frame": key["frame"] + first} for key in result.keys],
+              "body": result.body}
     if result.ground is not None:
         report["floor"] = {"axis": "XYZ"[result.ground.axis], "up": "+" if result.ground.sign > 0 else "-",
                            "height": round(result.ground.sign * result.ground.floor, 6)}

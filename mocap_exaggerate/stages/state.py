@@ -12,8 +12,8 @@ correct       positions, captured_pos, limbs                  positions, correct
 stretch       positions, captured_pos, limbs, paths           positions, stretch, stretch_keys
 subjoints     positions                                       hierarchy, sub_positions
 springs       rubber(), captured_pos, limbs                   sub_positions, substeps
-constraints   rubber(), captured, limbs, stretch_keys,        sub_positions, pins, constraints
-              speed_limit
+constraints   rubber(), captured, limbs, stretch_keys,        sub_positions, pins, constraints,
+              speed_limit                                     warnings
 orient        rubber(), captured, pins, speed_limit           output
 ============  ==============================================  ==============================
 

@@ -1,0 +1,225 @@
+"""Limbs kept out of the body, and knees and elbows bending the captured way (part of the constraints block).
+
+Exaggerating each joint's path on its own can put a hand through the chest, fold a shin into
+its thigh or bend a knee backwards; Kwon and Lee name it as a limitation of their method.
+Here, after the contacts, targets and stretch keys and before the floor:
+
+- `keep_out`: each hand, forearm, foot and shin is pushed out of the torso, pelvis, head and
+  thighs (`mocap_exaggerate.analysis.body`) by as much as it is deeper in than the captured
+  one at that frame, the shortest way (away from the capsule's axis), eased in time so the
+  push never falls short on a frame and grows and fades over ``ramp`` frames; the limb's
+  end moves and its chain bends to follow, as for a contact;
+- `unbend_hinges`: a knee or elbow on the wrong side of its limb's base-to-end line (the
+  side opposite the one the captured joint bends to, `hinge_pole`) is brought back onto the
+  line, eased the same way, the sub-joints on both its links moving with it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..analysis.body import body_capsules, limb_parts, penetrations
+from ..core.timing import end_ramp, spread_max
+
+__all__ = ["keep_out", "unbend_hinges", "eased_push", "move_middle", "EASE"]
+
+#: A push out of the body grows and fades over this many contact ramps (contacts.blend, 0.15 s): a hand
+#: swinging past the hips is in the pelvis for a few frames, and pushed out over so few it shook.
+EASE = 2.0
+
+
+def eased_push(push: np.ndarray, ramp: int) -> np.ndarray:
+    """(F, 3) pushes eased in time: the size spread over ``ramp`` frames (`spread_max`: never below a
+    frame's own but within ``ramp`` of the clip's ends, where it fades to nothing; growing and fading over
+    ``ramp``, zero ``2 ramp`` frames from any push) along the
+    pushes' directions smoothed by their own size (a Gaussian reaching past the spread: where it stopped
+    short the push dropped from a third of its size to nothing in a frame)."""
+    from scipy.ndimage import gaussian_filter1d
+
+    size = np.linalg.norm(push, axis=-1)
+    if not np.any(size > 0):
+        return push
+    radius = max(1, int(ramp))
+    # Nothing at the clip's first and last frames, where the exaggeration is nothing either (and kept
+    # rest-pose frames meet the motion).
+    spread = spread_max(size, radius) * end_ramp(len(push), min(max(2.0, radius / 4), len(push) / 4))
+    direction = gaussian_filter1d(push, radius / 3.0, axis=0, mode="nearest", truncate=6.5)
+    length = np.linalg.norm(direction, axis=-1, keepdims=True)
+    return np.where(length > 0, spread[:, None] * direction / np.maximum(length, 1e-300), 0.0)
+
+
+def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, captured_pos: np.ndarray, ramp: float,
+             pins: dict[int, np.ndarray], move_end: Callable[[np.ndarray, object, np.ndarray], None],
+             chain_of: Callable[[tuple[int, ...]], np.ndarray], rounds: int = 6,
+             asked: dict[int, np.ndarray] | None = None) -> dict[str, int]:
+    """Push the limbs out of the body (in place on ``out (F, J', 3)``, the rubber hierarchy's positions).
+
+    ``move_end(out, effector, goal)`` bends an effector's chain so its end reaches ``goal (F, 3)``;
+    ``chain_of`` gives the rubber chain of an original one. A planted end (``pins``, joint -> (F,)
+    weight) is not moved on its planted frames: its knee (or elbow) moves the part out instead. An end
+    the user put somewhere (``asked``: a target, a stretch's length; joint -> (F,) weight) is left there.
+    Returns the frames each part was pushed on, by part.
+    """
+    capsules = body_capsules(limbs, captured_pos)
+    if not capsules:
+        return {}
+    parts = limb_parts(limbs)
+    margin = 0.05 * min(capsule.radius for capsule in capsules)
+    captured_depth = {name: np.maximum(found[0], 0.0) for name, found in
+                      penetrations(captured_pos, capsules, parts).items()}
+    original = hierarchy.original
+    pushed: dict[str, int] = {}
+    # A push may swing a limb out, or lengthen it to at most its longest elsewhere in the clip.
+    longest = {name: float(np.linalg.norm(out[:, original[limb.end]] - out[:, original[limb.base]], axis=-1).max())
+               for name, limb in limbs.items() if name in {part.limb for part in parts}}
+    for _ in range(rounds):
+        found = penetrations(out[:, original], capsules, parts, reference=captured_pos)
+        moved = False
+        for limb_name in {part.limb for part in parts}:
+            limb = limbs[limb_name]
+            if limb.end not in effectors:
+                continue
+            upper = np.linalg.norm(out[:, original[limb.joints[1]]] - out[:, original[limb.joints[0]]], axis=-1)
+            lower = np.linalg.norm(out[:, original[limb.joints[2]]] - out[:, original[limb.joints[1]]], axis=-1)
+            push = np.zeros((len(out), 3))
+            bend = np.zeros((len(out), 3))  # the middle joint's share, for a planted end that cannot move
+            lift = np.zeros((len(out), 3))  # the body's, for a planted shin in the trunk (sat down onto it)
+            middle = np.zeros((len(out), 3))  # the middle joint's, beyond what the end's move takes it
+            for part in (p for p in parts if p.limb == limb_name):
+                depth, away, along, trunk = found[part.name]
+                # Deeper than the capture goes: out to it and a little past (the floor and the evening of
+                # sub-links come after); nothing where it is no deeper.
+                excess = depth - captured_depth[part.name]
+                need = np.where((depth > 0) & (excess > 0), excess + margin, 0.0)
+                if not np.any(need > 0):
+                    continue
+                pushed[part.name] = pushed.get(part.name, 0) + int(np.sum(need > 0))
+                out_of = need[:, None] * away
+                side = limb_name.split("_")[0]
+                if part.a == part.b and {f"{side}_upper_arm", f"{side}_thigh"} & set(part.avoid):
+                    # An end folded into its own upper bone: the middle joint follows the end by its share
+                    # of the chain, so they part by the rest.
+                    wanted = out_of / np.maximum(lower / np.maximum(upper + lower, 1e-12), 0.5)[:, None]
+                    middle_wanted = np.zeros_like(out_of)
+                else:
+                    # A point along a forearm or shin moves by about its share of the chain's length of the
+                    # end's move (the chain bends by shares of it): the end moves that much further, at most
+                    # twice. (Moving the elbow or knee out as well bent it backwards.)
+                    share = (upper + along * lower) / np.maximum(upper + lower, 1e-12)
+                    wanted = out_of / np.maximum(share, 0.5)[:, None]
+                    middle_wanted = np.zeros_like(out_of)
+                bigger = np.linalg.norm(wanted, axis=-1) > np.linalg.norm(push, axis=-1)
+                push = np.where(bigger[:, None], wanted, push)
+                middle = np.where(bigger[:, None], middle_wanted, middle)
+                if part.a != part.b:  # with the end held, the middle joint moves it: by 1 - along of the way
+                    wanted = (need / np.maximum(1.0 - along, 0.5))[:, None] * away
+                    bigger = np.linalg.norm(wanted, axis=-1) > np.linalg.norm(bend, axis=-1)
+                    bend = np.where(bigger[:, None], wanted, bend)
+                # Near its held end (a foot, or the shin's lower half in the trunk: sat down onto it) the knee
+                # cannot take it out: the body moves off it instead.
+                near_end = np.ones(len(out), bool) if part.a == part.b else trunk & (along > 0.5)
+                wanted = np.where(near_end[:, None], -out_of, 0.0)
+                bigger = np.linalg.norm(wanted, axis=-1) > np.linalg.norm(lift, axis=-1)
+                lift = np.where(bigger[:, None], wanted, lift)
+            if not np.any(push):
+                continue
+            pin = pins.get(limb.end)
+            held = np.zeros(len(out)) if pin is None else pin
+            left_alone = 1.0 - (asked or {}).get(limb.end, np.zeros(len(out)))
+            # (the eased push spreads in time: weighed again so a target's own frames stay exact)
+            free = ((1.0 - held) * left_alone)[:, None]
+            span = int(round(EASE * ramp))
+            move_end(out, effectors[limb.end], _no_longer(out[:, original[limb.joints[0]]], out[:, original[limb.end]],
+                                                          eased_push(push * free, span) * free, longest[limb_name]))
+            knee = middle * free + bend * held[:, None]
+            if np.any(knee):
+                move_middle(out, chain_of(tuple(limb.joints)), original[limb.joints[1]], eased_push(knee, 2 * span))
+            if pin is not None and np.any(lift * held[:, None]):
+                _move_body(out, original, limbs, effectors, pins, eased_push(lift * held[:, None], 2 * span), move_end)
+            moved = True
+        if not moved:
+            break
+    return pushed
+
+
+def _no_longer(base: np.ndarray, end: np.ndarray, push: np.ndarray, longest: float) -> np.ndarray:
+    """Where a limb's end goes when pushed: ``end + push``, brought back toward ``base`` where the push
+    would make the limb longer than ``longest`` (its longest in the clip) or than it is now, whichever
+    is more (it swings out of the body; pushed straight out, it stretched an arm past the preset's range)."""
+    goal = end + push
+    now = np.maximum(np.linalg.norm(end - base, axis=-1, keepdims=True), longest)
+    then = np.linalg.norm(goal - base, axis=-1, keepdims=True)
+    return np.where(then > now, base + (goal - base) * np.divide(now, then, out=np.ones_like(now), where=then > 0),
+                    goal)
+
+
+def _move_body(out: np.ndarray, original: np.ndarray, limbs: dict, effectors: dict, pins: dict[int, np.ndarray],
+               shift: np.ndarray, move_end) -> None:
+    """Move the whole body by ``shift (F, 3)`` (in place), the planted feet staying by their own legs."""
+    stay = {}
+    for name in ("left_leg", "right_leg"):
+        limb = limbs.get(name)
+        if limb is not None and limb.end in pins and limb.end in effectors:
+            stay[limb.end] = out[:, original[limb.end]].copy()
+    out += shift[:, None]
+    for end, where in stay.items():
+        weight = pins[end][:, None]
+        move_end(out, effectors[end], out[:, original[end]] + weight * (where - out[:, original[end]]))
+
+
+def behind_line(positions: np.ndarray, joints, pole: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far a limb's middle joint is behind its base-to-end line (F,) (negative: in front, the way
+    ``pole`` (F, 3) points), and the unit way to the front across the line (F, 3)."""
+    base, middle, end = (positions[:, j] for j in joints)
+    line = end - base
+    line = line / np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
+    offset = middle - base
+    offset = offset - np.sum(offset * line, axis=-1, keepdims=True) * line
+    side = pole - np.sum(pole * line, axis=-1, keepdims=True) * line
+    side = side / np.maximum(np.linalg.norm(side, axis=-1, keepdims=True), 1e-12)
+    return -np.sum(offset * side, axis=-1), side
+
+
+def unbend_hinges(out: np.ndarray, hierarchy, limbs: dict, poles: dict[str, np.ndarray], captured_pos: np.ndarray,
+                  chain_of: Callable[[tuple[int, ...]], np.ndarray]) -> dict[str, int]:
+    """Bring knees and elbows bent the wrong way back to their limb's line (in place on ``out``).
+
+    poles : limb name -> (F, 3) the side its middle joint bends to (`hinge_pole`, from the capture);
+    captured_pos : (F, J, 3) the capture: a joint is brought back only as far as it is further behind
+    than the captured one (the capture's own overextension stays); chain_of : the rubber chain
+    (hierarchy indices, base to end) of an original chain. Returns the frames each limb was unbent on.
+    """
+    original = hierarchy.original
+    done: dict[str, int] = {}
+    for name, pole in poles.items():
+        limb = limbs[name]
+        behind, side = behind_line(out[:, original], limb.joints, pole)
+        captured, _ = behind_line(captured_pos, limb.joints, pole)
+        excess = behind - np.maximum(captured, 0.0)
+        if not np.any(excess > 0):
+            continue
+        done[name] = int(np.sum(excess > 0))
+        # A C1 clip of the excess: 0 up to the line, easing in over 1 % of the limb's reach, then all of
+        # it but half that (smooth where the joint crosses the line: easing it in time as the pushes are
+        # bent joints already forward further forward, and stretched an arm past the preset's range).
+        width = 0.01 * float(np.linalg.norm(out[:, original[limb.end]] - out[:, original[limb.base]], axis=-1).max())
+        amount = np.where(excess < width, np.maximum(excess, 0.0) ** 2 / (2 * width), excess - width / 2)
+        move_middle(out, chain_of(tuple(limb.joints)), original[limb.joints[1]], amount[:, None] * side)
+    return done
+
+
+def move_middle(out: np.ndarray, chain: np.ndarray, middle: int, move: np.ndarray) -> None:
+    """Move a chain's middle joint by ``move (F, 3)`` (in place), its base and end staying: the sub-joints on
+    its two links move by their share of the way (along the chain) from the base or the end to it."""
+    points = out[:, chain]
+    steps = np.linalg.norm(np.diff(points, axis=1), axis=-1)
+    at = np.concatenate([np.zeros((len(out), 1)), np.cumsum(steps, axis=1)], axis=1)
+    knee = int(np.flatnonzero(chain == middle)[0])
+    up = np.divide(at, at[:, knee:knee + 1], out=np.zeros_like(at), where=at[:, knee:knee + 1] > 1e-12)
+    down = np.divide(at[:, -1:] - at, at[:, -1:] - at[:, knee:knee + 1], out=np.zeros_like(at),
+                     where=(at[:, -1:] - at[:, knee:knee + 1]) > 1e-12)
+    weight = np.where(np.arange(len(chain)) <= knee, up, down)
+    weight[:, 0] = weight[:, -1] = 0.0
+    out[:, chain] += weight[..., None] * move[:, None]

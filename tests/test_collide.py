@@ -1,0 +1,64 @@
+"""Issue 25, part 5: limbs kept out of the body, knees and elbows bending the captured way."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from mocap_exaggerate import load_bvh, load_preset
+from mocap_exaggerate.analysis.body import body_capsules, inside_body, limb_parts, penetrations, segment_closest
+from mocap_exaggerate.analysis.limbs import find_limbs
+from mocap_exaggerate.analysis.quality import motion_quality
+from mocap_exaggerate.pipeline import run
+from mocap_exaggerate.stages.collide import eased_push
+
+from .helpers import SAMPLE_DIR, shared
+
+
+def test_segment_closest_known_answers():
+    p0, p1 = np.array([[0.0, 0, 0], [0, 0, 0], [0, 0, 0]]), np.array([[2.0, 0, 0], [2, 0, 0], [0, 0, 0]])
+    q0 = np.array([[1.0, 1, -1], [3.0, 1, 0], [0, 3, 0]])
+    q1 = np.array([[1.0, 1, 1], [4.0, 1, 0], [0, 3, 0]])
+    s, t, gap = segment_closest(p0, p1, q0, q1)
+    # Crossing segments 1 apart; parallel-ish ones ending past each other; a point to a point.
+    np.testing.assert_allclose(s, [0.5, 1.0, 0.0])
+    np.testing.assert_allclose(t, [0.5, 0.0, 0.0])
+    np.testing.assert_allclose(gap, [[0, -1, 0], [-1, -1, 0], [0, -3, 0]], atol=1e-12)
+
+
+def test_a_hand_put_through_the_chest_is_inside_and_its_way_out_is_away_from_the_spine():
+    motion = load_bvh(SAMPLE_DIR / "mocapbank_sit_down_stand_up.bvh")
+    limbs = find_limbs(motion.skeleton)
+    pose = np.repeat(motion.world_positions()[:1], 3, axis=0)
+    assert not inside_body(limbs, pose).any()  # standing, arms down: nothing inside
+    spine = limbs["spine"]
+    chest = 0.5 * (pose[1, spine.joints[1]] + pose[1, spine.joints[2]])
+    arm = limbs["right_arm"]
+    pose[1, arm.joints[2]] = chest  # the wrist in the middle of the chest
+    inside = inside_body(limbs, pose)
+    assert inside.tolist() == [False, True, False]
+    depth, away, along, trunk = penetrations(pose, body_capsules(limbs, pose), limb_parts(limbs))["right_forearm"]
+    assert depth[1] > 0 and trunk[1] and along[1] == pytest.approx(1.0)
+    assert np.linalg.norm(away[1]) == pytest.approx(1.0)
+
+
+def test_an_eased_push_covers_every_frame_and_grows_and_fades():
+    push = np.zeros((40, 3))
+    push[18:22, 0] = 1.0
+    eased = eased_push(push, 6)
+    assert np.all(eased[18:22, 0] >= 1.0 - 1e-12)  # never short of a frame's own push
+    assert eased[5, 0] == 0.0 and eased[35, 0] == 0.0  # and nothing far from it
+    assert np.abs(np.diff(eased[:, 0])).max() < 0.35  # no step of the whole push in a frame
+
+
+@pytest.mark.parametrize("clip", ["assimp_boxing_toes.bvh", "cmu_14_19_laugh_idle_daz.bvh"])
+def test_forearms_stay_out_of_the_body_where_the_capture_does(clip):
+    # Before: the boxer at cartoon had forearms in the torso on 289 frames (0 captured), the laugh at looney 425 (27).
+    motion = load_bvh(shared(clip))
+    config = load_preset("cartoon")
+    quality = motion_quality(motion, run(motion, config))
+    assert quality["inside"] <= quality["inside_captured"], quality["inside"]
+    off = motion_quality(motion, run(motion, replace(config, contacts=replace(config.contacts, collide=False))))
+    assert off["inside"] > quality["inside"] + 20  # the pass is what keeps them out
