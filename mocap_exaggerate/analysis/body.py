@@ -25,7 +25,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["Capsule", "Part", "body_capsules", "limb_parts", "segment_closest", "penetrations", "inside_body"]
+__all__ = ["Capsule", "Part", "body_capsules", "limb_parts", "segment_closest", "captured_sides", "penetrations",
+           "inside_body"]
 
 
 class Capsule(NamedTuple):
@@ -125,20 +126,35 @@ def segment_closest(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarr
     return s, t, gap
 
 
+def captured_sides(reference: np.ndarray, capsules: list[Capsule], parts: list[Part]) -> dict[tuple[str, int], np.ndarray]:
+    """Per (part, capsule index) the way (F, 3) from the capsule's axis to the part in ``reference`` (the
+    capture), for `penetrations`: it does not change while the output is pushed, so it is found once."""
+    out = {}
+    for part in parts:
+        for index, capsule in enumerate(capsules):
+            if capsule.name in part.avoid:
+                r0, r1 = capsule.ends(reference)
+                out[part.name, index] = segment_closest(reference[:, part.a], reference[:, part.b], r0, r1)[2]
+    return out
+
+
 def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Part],
-                 reference: np.ndarray | None = None) -> dict[str, tuple]:
+                 reference: np.ndarray | dict | None = None) -> dict[str, tuple]:
     """Per part, how deep it is in the body at each frame: ``(depth (F,), away (F, 3) unit, along (F,),
     trunk (F,) bool)``: the most any of its capsules' radius exceeds the distance between the axes (<= 0:
     outside), the way out from that capsule's axis at the closest point, where along the part (0 at its
     first joint), and whether that capsule is the torso, pelvis or head.
 
-    reference : (F, J, 3) the capture: the way out is then the side of the capsule the captured part
-        is on (across the capsule's axis here), so a part passing through the axis is not pushed one
-        way and then the other; its own side only where the captured part is on the axis too.
+    reference : (F, J, 3) the capture, or its `captured_sides`: the way out is then the side of the
+        capsule the captured part is on (across the capsule's axis here), so a part passing through the
+        axis is not pushed one way and then the other; its own side only where the captured part is on
+        the axis too.
     """
-    by_name: dict[str, list[Capsule]] = {}
-    for capsule in capsules:
-        by_name.setdefault(capsule.name, []).append(capsule)
+    if reference is not None and not isinstance(reference, dict):
+        reference = captured_sides(reference, capsules, parts)
+    by_name: dict[str, list[tuple[int, Capsule]]] = {}
+    for index, capsule in enumerate(capsules):
+        by_name.setdefault(capsule.name, []).append((index, capsule))
     out = {}
     frames = len(positions)
     for part in parts:
@@ -148,7 +164,7 @@ def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Par
         trunk = np.zeros(frames, bool)
         p0, p1 = positions[:, part.a], positions[:, part.b]
         for name in part.avoid:
-            for capsule in by_name.get(name, ()):
+            for index, capsule in by_name.get(name, ()):
                 q0, q1 = capsule.ends(positions)
                 s, _, gap = segment_closest(p0, p1, q0, q1)
                 distance = np.linalg.norm(gap, axis=-1)
@@ -157,8 +173,7 @@ def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Par
                 across = np.cross(axis, np.eye(3)[np.argmin(np.abs(axis), axis=-1)])
                 gap = np.where((distance < 1e-12)[:, None], across, gap)
                 if reference is not None:
-                    r0, r1 = capsule.ends(reference)
-                    _, _, side = segment_closest(reference[:, part.a], reference[:, part.b], r0, r1)
+                    side = reference[part.name, index]
                     unit = axis / np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-12)
                     side = side - np.sum(side * unit, axis=-1, keepdims=True) * unit
                     known = np.linalg.norm(side, axis=-1) > 0.05 * capsule.radius  # (not on the axis itself)

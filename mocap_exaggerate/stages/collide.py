@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..analysis.body import body_capsules, limb_parts, penetrations
+from ..analysis.body import body_capsules, captured_sides, limb_parts, penetrations
 from ..core.timing import end_ramp, spread_max
 
 __all__ = ["keep_out", "unbend_hinges", "eased_push", "move_middle", "EASE"]
@@ -74,8 +74,9 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, captured_
     # A push may swing a limb out, or lengthen it to at most its longest elsewhere in the clip.
     longest = {name: float(np.linalg.norm(out[:, original[limb.end]] - out[:, original[limb.base]], axis=-1).max())
                for name, limb in limbs.items() if name in {part.limb for part in parts}}
+    sides = captured_sides(captured_pos, capsules, parts)
     for _ in range(rounds):
-        found = penetrations(out[:, original], capsules, parts, reference=captured_pos)
+        found = penetrations(out[:, original], capsules, parts, reference=sides)
         moved = False
         for limb_name in {part.limb for part in parts}:
             limb = limbs[limb_name]
