@@ -24,7 +24,7 @@ from ..core.skeleton import Skeleton
 from ..core.timing import smootherstep
 
 __all__ = ["Limb", "LIMB_NAMES", "find_limbs", "limb_joints", "limb_length", "standing_up", "is_helper", "main_child",
-           "hinge_pole", "offset_from_line"]
+           "hinge_pole", "offset_from_line", "behind_line"]
 
 LIMB_NAMES = ("left_arm", "right_arm", "left_leg", "right_leg", "spine", "neck")
 
@@ -288,3 +288,16 @@ def hinge_pole(chain: np.ndarray, base_rotation: np.ndarray) -> np.ndarray | Non
     usual = quat_rotate(base_rotation, np.broadcast_to(usual / np.linalg.norm(usual), own.shape))
     clear = smootherstep((bent - 0.05) / 0.15)[:, None]
     return clear * own / np.maximum(bent * upper, 1e-12)[:, None] + (1.0 - clear) * usual
+
+
+def behind_line(positions: np.ndarray, joints, pole: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far a limb's middle joint is behind its base-to-end line (F,) (negative: in front, the way
+    ``pole`` (F, 3) points), and the unit way to the front across the line (F, 3)."""
+    base, middle, end = (positions[:, j] for j in joints)
+    line = end - base
+    line = line / np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
+    offset = middle - base
+    offset = offset - np.sum(offset * line, axis=-1, keepdims=True) * line
+    side = pole - np.sum(pole * line, axis=-1, keepdims=True) * line
+    side = side / np.maximum(np.linalg.norm(side, axis=-1, keepdims=True), 1e-12)
+    return -np.sum(offset * side, axis=-1), side

@@ -36,7 +36,7 @@ import numpy as np
 from ..core.motion import Motion
 from ..core.rotations import quat_angle
 from .body import inside_body
-from .limbs import find_limbs, hinge_pole
+from .limbs import behind_line, find_limbs, hinge_pole
 
 __all__ = ["motion_quality", "turn_degrees", "still_frames", "STRETCHED"]
 
@@ -136,8 +136,8 @@ def motion_quality(motion: Motion, result) -> dict:
             continue
         pole = hinge_pole(cap[:, list(limb.joints)], motion.world_rotations()[:, limb.base])
         if pole is not None:
-            backwards += int(np.sum((_bend_along(out, limb.joints, pole) < -0.01 * h)
-                                    & (_bend_along(cap, limb.joints, pole) > 0)))
+            backwards += int(np.sum((behind_line(out, limb.joints, pole)[0] > 0.01 * h)
+                                    & (behind_line(cap, limb.joints, pole)[0] < 0)))
 
     limb_peaks = [v["peak"] for k, v in stretch.items() if k.endswith(("_arm", "_leg"))]
     torso_peaks = [v["peak"] for k, v in stretch.items() if k in ("spine", "neck")]
@@ -150,18 +150,6 @@ def motion_quality(motion: Motion, result) -> dict:
         "drift": drift(out_all[:, root]), "drift_captured": drift(cap[:, 0]),
         "inside": int(inside.sum()), "inside_captured": int(inside_captured.sum()), "backwards": backwards,
     }
-
-
-def _bend_along(positions: np.ndarray, joints, pole: np.ndarray) -> np.ndarray:
-    """(F,) how far a limb's middle joint is off its base-to-end line toward ``pole`` (negative: the other way)."""
-    base, middle, end = (positions[:, j] for j in joints)
-    line = end - base
-    line = line / np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
-    offset = middle - base
-    offset = offset - np.sum(offset * line, axis=-1, keepdims=True) * line
-    side = pole - np.sum(pole * line, axis=-1, keepdims=True) * line
-    side = side / np.maximum(np.linalg.norm(side, axis=-1, keepdims=True), 1e-12)
-    return np.sum(offset * side, axis=-1)
 
 
 def face_stretch(skin, bind: np.ndarray, rotations: np.ndarray, positions: np.ndarray, joint_index: np.ndarray,

@@ -21,6 +21,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..analysis.body import body_capsules, captured_sides, limb_parts, penetrations
+from ..analysis.limbs import behind_line
 from ..core.timing import end_ramp, spread_max
 
 __all__ = ["keep_out", "unbend_hinges", "eased_push", "move_middle", "EASE"]
@@ -168,19 +169,6 @@ def _move_body(out: np.ndarray, original: np.ndarray, limbs: dict, effectors: di
     for end, where in stay.items():
         weight = pins[end][:, None]
         move_end(out, effectors[end], out[:, original[end]] + weight * (where - out[:, original[end]]))
-
-
-def behind_line(positions: np.ndarray, joints, pole: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """How far a limb's middle joint is behind its base-to-end line (F,) (negative: in front, the way
-    ``pole`` (F, 3) points), and the unit way to the front across the line (F, 3)."""
-    base, middle, end = (positions[:, j] for j in joints)
-    line = end - base
-    line = line / np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
-    offset = middle - base
-    offset = offset - np.sum(offset * line, axis=-1, keepdims=True) * line
-    side = pole - np.sum(pole * line, axis=-1, keepdims=True) * line
-    side = side / np.maximum(np.linalg.norm(side, axis=-1, keepdims=True), 1e-12)
-    return -np.sum(offset * side, axis=-1), side
 
 
 def unbend_hinges(out: np.ndarray, hierarchy, limbs: dict, poles: dict[str, np.ndarray], captured_pos: np.ndarray,
