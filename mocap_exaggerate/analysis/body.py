@@ -145,10 +145,10 @@ def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Par
     outside), the way out from that capsule's axis at the closest point, where along the part (0 at its
     first joint), and whether that capsule is the torso, pelvis or head.
 
-    reference : (F, J, 3) the capture, or its `captured_sides`: the way out is then the side of the
-        capsule the captured part is on (across the capsule's axis here), so a part passing through the
-        axis is not pushed one way and then the other; its own side only where the captured part is on
-        the axis too.
+    reference : (F, J, 3) the capture, or its `captured_sides`: where the part is near the capsule's
+        axis (within half its radius) the way out is then the side the captured part is on, so a part
+        passing through the axis is not pushed one way and then the other; elsewhere its own shortest
+        way (pushed back across the body to the captured side, a hand went round and round it).
     """
     if reference is not None and not isinstance(reference, dict):
         reference = captured_sides(reference, capsules, parts)
@@ -176,7 +176,10 @@ def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Par
                     side = reference[part.name, index]
                     unit = axis / np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-12)
                     side = side - np.sum(side * unit, axis=-1, keepdims=True) * unit
-                    known = np.linalg.norm(side, axis=-1) > 0.05 * capsule.radius  # (not on the axis itself)
+                    # (the captured side where the part is near the axis, its own way out where it is
+                    # clearly on one side: pushed back across the body to the captured side it went
+                    # round and round)
+                    known = (np.linalg.norm(side, axis=-1) > 0.05 * capsule.radius) & (distance < 0.5 * capsule.radius)
                     gap = np.where(known[:, None], side, gap)
                 deeper = capsule.radius - distance > depth
                 depth = np.where(deeper, capsule.radius - distance, depth)
