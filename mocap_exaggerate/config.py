@@ -232,6 +232,7 @@ class PipelineConfig:
         if not isinstance(data, dict):
             raise ConfigError(f"{source}: expected a table of blocks")
         blocks: dict[str, Any] = {}
+        retired: list[tuple[str, str]] = []
         for key, value in data.items():
             if key == "preset":  # where the settings started: the base a file's blocks are laid over
                 _check_preset_key(value, source)
@@ -257,9 +258,8 @@ class PipelineConfig:
                 raise ConfigError(f"{source}: [{key}] must be a table")
             block_type = _BLOCKS[key]
             known = {f.name for f in fields(block_type)}
-            for name in [n for n in value if (key, n) in RETIRED]:
-                log.warning("%s: %s.%s is retired and ignored: %s", source, key, name, RETIRED[key, name])
-                value = {n: v for n, v in value.items() if n != name}
+            retired += [(key, name) for name in value if (key, name) in RETIRED]
+            value = {n: v for n, v in value.items() if (key, n) not in RETIRED}
             for name in value:
                 if name not in known:
                     raise ConfigError(f"{source}: unknown key {key}.{name} (known: {', '.join(sorted(known))})")
@@ -271,9 +271,12 @@ class PipelineConfig:
             except TypeError as error:
                 raise ConfigError(f"{source}: [{key}]: {error}") from None
         try:
-            return cls(**blocks)
+            config = cls(**blocks)
         except ConfigError as error:
             raise ConfigError(f"{source}: {error}") from None
+        for key, name in retired:  # (said once the file is known to be good: a refused one gets one line)
+            log.warning("%s: %s.%s is retired and ignored: %s", source, key, name, RETIRED[key, name])
+        return config
 
     def to_dict(self) -> dict[str, Any]:
         """Nested plain tables (TOML-ready: None values are left out)."""

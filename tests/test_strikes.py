@@ -155,3 +155,13 @@ def test_a_pipeline_file_from_before_still_reads_and_says_what_it_ignored(tmp_pa
         assert run.stderr.count(f"auto_stretch.{key} is retired and ignored") == 1, run.stderr
     written = (tmp_path / "out" / "cmu_09_01_run_daz.pipeline.toml").read_text()
     assert "min_rate" not in written and "min_reach = 0.85" in written
+
+
+def test_a_refused_pipeline_file_gets_one_line_even_with_retired_keys(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[auto_stretch]\nmin_rate = 3.0\nmin_angle = -5\n")
+    run = subprocess.run(
+        [sys.executable, "-m", "mocap_exaggerate_cli.main", "exaggerate", str(SAMPLE_DIR / "cmu_09_01_run_daz.bvh"),
+         "-o", str(tmp_path / "out"), "--config", str(bad)], capture_output=True, text=True)
+    assert run.returncode == 2 and run.stderr.count("\n") == 1, run.stderr
+    assert "min_angle" in run.stderr and not (tmp_path / "out").exists()
