@@ -79,7 +79,8 @@ def parse_frame(value: str | float | int, frame_time: float, *, what: str) -> in
 
 
 
-def gaussian_average(world_pos: np.ndarray, sigma: float, *, axis: int = 0, ends: str = "reflect") -> np.ndarray:
+def gaussian_average(world_pos: np.ndarray, sigma: float, *, axis: int = 0, ends: str = "reflect",
+                     truncate: float = 4.0) -> np.ndarray:
     """Gaussian average along time with point-reflected ends.
 
     The trajectory is extended past each end by reflecting it through the end
@@ -92,11 +93,12 @@ def gaussian_average(world_pos: np.ndarray, sigma: float, *, axis: int = 0, ends
     ends : ``reflect`` (point reflection, as above) or ``nearest`` (the end value held,
         as ``scipy.ndimage.gaussian_filter1d(mode="nearest")``: for values that are not
         positions, such as a twist angle fading to 0)
+    truncate : the kernel reaches this many sigmas either side (scipy's ``truncate``)
     """
     world_pos = np.asarray(world_pos, dtype=np.float64)
     if sigma <= 0 or world_pos.shape[axis] < 2:
         return world_pos.copy()
-    radius = int(4.0 * sigma + 0.5)
+    radius = int(truncate * sigma + 0.5)
     moved = np.moveaxis(world_pos, axis, 0)
     edges = [(radius, radius)] + [(0, 0)] * (moved.ndim - 1)
     padded = np.pad(moved, edges, mode="edge") if ends == "nearest" else np.pad(moved, edges, mode="reflect",

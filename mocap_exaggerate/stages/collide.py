@@ -22,7 +22,7 @@ import numpy as np
 
 from ..analysis.body import body_capsules, captured_sides, limb_parts, penetrations
 from ..analysis.limbs import behind_line
-from ..core.timing import end_ramp, spread_max
+from ..core.timing import end_ramp, gaussian_average, spread_max
 
 __all__ = ["keep_out", "unbend_hinges", "eased_push", "move_middle", "EASE"]
 
@@ -37,8 +37,6 @@ def eased_push(push: np.ndarray, ramp: int) -> np.ndarray:
     ``ramp``, zero ``2 ramp`` frames from any push) along the
     pushes' directions smoothed by their own size (a Gaussian reaching past the spread: where it stopped
     short the push dropped from a third of its size to nothing in a frame)."""
-    from scipy.ndimage import gaussian_filter1d
-
     size = np.linalg.norm(push, axis=-1)
     if not np.any(size > 0):
         return push
@@ -46,7 +44,7 @@ def eased_push(push: np.ndarray, ramp: int) -> np.ndarray:
     # Nothing at the clip's first and last frames, where the exaggeration is nothing either (and kept
     # rest-pose frames meet the motion).
     spread = spread_max(size, radius) * end_ramp(len(push), min(max(2.0, radius / 4), len(push) / 4))
-    direction = gaussian_filter1d(push, radius / 3.0, axis=0, mode="nearest", truncate=6.5)
+    direction = gaussian_average(push, radius / 3.0, ends="nearest", truncate=6.5)
     length = np.linalg.norm(direction, axis=-1, keepdims=True)
     return np.where(length > 0, spread[:, None] * direction / np.maximum(length, 1e-300), 0.0)
 
