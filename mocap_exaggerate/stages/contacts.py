@@ -556,6 +556,8 @@ def laplacian_deform(points: np.ndarray, end: np.ndarray, rest: np.ndarray) -> n
 SOFT_REACH = 0.1
 #: Reach (base to end over the bones' length) below which a two-bone chain folds as rubber, easing in from the second.
 FOLDED = (0.2, 0.45)
+#: The limbs whose middle joint is a hinge (a knee, an elbow) the body pass keeps bending the captured way.
+LIMB_HINGES = ("left_arm", "right_arm", "left_leg", "right_leg")
 #: A stretch's length missed by more than this share is said (a warning: stderr and the manifest).
 SHORTFALL = 0.01
 #: Frames (a Gaussian's sigma) over which a two-bone chain's middle joint's move is eased in time.
@@ -703,6 +705,16 @@ def constrain(
     original = hierarchy.original
     rest = hierarchy.skeleton.link_lengths()
     ramp = parse_duration(config.blend, frame_time, what="contacts.blend")
+    poles: dict[int, np.ndarray | None] = {}
+
+    def pole_of(effector: Effector) -> np.ndarray | None:
+        """Where the effector's knee or elbow points (`hinge_pole`), for a chain of three original joints."""
+        if effector.joint not in poles:
+            chain = list(effector.chain)
+            poles[effector.joint] = (hinge_pole(captured_pos[:, chain], captured_rot[:, chain[0]])
+                                     if len(chain) == 3 else None)
+        return poles[effector.joint]
+
     goals: dict[int, np.ndarray] = {}
 
     def goal(joint: int) -> np.ndarray:
@@ -753,7 +765,7 @@ def constrain(
         g += weight[:, None] * (out[:, original[key.base]] + key.vectors - g)
         asked[key.end] = np.maximum(asked.get(key.end, 0.0), weight)
     for joint, g in goals.items():
-        _move_end(out, hierarchy, effectors[joint], g, rest, captured_pos, captured_rot)
+        _move_end(out, hierarchy, effectors[joint], g, rest, pole_of(effectors[joint]))
 
     def lift_ends() -> None:
         """Lift each end effector (and its toes) off the floor, its chain bending to follow."""
@@ -770,36 +782,34 @@ def constrain(
                     break
                 lift = _spread_lift(lift, ramp, pins.get(joint))
                 _move_end(out, hierarchy, effector, out[:, original[joint]] + lift[:, None] * up, rest,
-                          captured_pos, captured_rot)
+                          pole_of(effector))
 
     body: dict[str, dict[str, int]] = {}
     floor = config.enabled and config.floor
     if config.enabled and config.collide:
         # Knees and elbows the captured way, then the limbs out of the body; the floor has the last say, and
         # a hand lifted off it (a scoop) can fold into the body again: out of the body once more, then the floor.
-        poles = {}
-        for name in ("left_arm", "right_arm", "left_leg", "right_leg"):
-            limb = limbs.get(name)
-            if limb is not None and len(limb.joints) == 3 and limb.end in effectors:
-                pole = hinge_pole(captured_pos[:, list(limb.joints)], captured_rot[:, limb.joints[0]])
-                if pole is not None:
-                    poles[name] = pole
+        hinges = {name: pole_of(effectors[limb.end]) for name, limb in limbs.items()
+                  if name in LIMB_HINGES and len(limb.joints) == 3 and limb.end in effectors
+                  and tuple(effectors[limb.end].chain) == tuple(limb.joints)}
+        hinges = {name: pole for name, pole in hinges.items() if pole is not None}
+
         def move(points: np.ndarray, effector: Effector, goal: np.ndarray) -> None:
-            _move_end(points, hierarchy, effector, goal, rest, captured_pos, captured_rot)
+            _move_end(points, hierarchy, effector, goal, rest, pole_of(effector))
 
         def chain_of(chain: tuple[int, ...]) -> np.ndarray:
             return sub_chain(hierarchy, chain)
 
         body["unbent"], body["pushed"] = {}, {}
         for _ in range(2 if floor else 1):
-            for kind, done in (("unbent", unbend_hinges(out, hierarchy, limbs, poles, captured_pos, chain_of)),
+            for kind, done in (("unbent", unbend_hinges(out, hierarchy, limbs, hinges, captured_pos, chain_of)),
                                ("pushed", keep_out(out, hierarchy, limbs, effectors, captured_pos, ramp, pins, move,
                                                   chain_of, asked=asked))):
                 for name, count in done.items():
                     body[kind][name] = max(body[kind].get(name, 0), count)
             if floor:
                 lift_ends()
-        unbend_hinges(out, hierarchy, limbs, poles, captured_pos, chain_of)  # what the floor's lifts bent back
+        unbend_hinges(out, hierarchy, limbs, hinges, captured_pos, chain_of)  # what the floor's lifts bent back
     elif floor:
         lift_ends()
 
@@ -838,34 +848,29 @@ def _spread_lift(lift: np.ndarray, ramp: float, pinned: np.ndarray | None) -> np
 
 
 def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, rest: np.ndarray,
-              captured_pos: np.ndarray, captured_rot: np.ndarray) -> None:
-    """Deform the effector's chain (in place) on the frames where its end must move."""
+              pole: np.ndarray | None) -> None:
+    """Deform the effector's chain (in place) so its end reaches ``goal``: the frames where it must move
+    (a two-bone chain's knee, eased in time, a little around them too).
+
+    pole : (F, 3) the side a two-bone chain of three original joints bends to (`hinge_pole`), or None
+    """
     chain = sub_chain(hierarchy, effector.chain)
     end = out[:, chain[-1]]
     frames = np.flatnonzero(np.any(np.abs(goal - end) > 0, axis=-1))
     if not len(frames):
         return
     points = out[frames][:, chain]
-    if len(chain) == 3:
-        # The side the capture's knee or elbow points to, when the three points are three original
-        # joints (not a two-joint chain cut once).
-        pole = None
-        if len(effector.chain) == 3:
-            pole = hinge_pole(captured_pos[:, list(effector.chain)], captured_rot[:, effector.chain[0]])
-        middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[frames],
-                             None if pole is None else pole[frames])
-        # The middle joint's move, eased in time: where the hip rushes past a planted foot the solve
-        # turns the knee faster than anything captured turns it.
-        move = np.zeros(end.shape)
-        move[frames] = middle - points[:, 1]
-        move = gaussian_average(move, HINGE_EASE)
-        moving = np.flatnonzero(np.any(np.abs(move) > 0, axis=-1) | np.isin(np.arange(len(end)), frames))
-        out[moving, chain[1]] += move[moving]
-        out[frames, chain[2]] = goal[frames]
+    if len(chain) != 3:
+        out[frames[:, None], chain[None, :]] = laplacian_deform(points, goal[frames], rest[chain])
         return
-    else:
-        new = laplacian_deform(points, goal[frames], rest[chain])
-    out[frames[:, None], chain[None, :]] = new
+    middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[frames],
+                         None if pole is None else pole[frames])
+    # The middle joint's move, eased in time: where the hip rushes past a planted foot the solve
+    # turns the knee faster than anything captured turns it.
+    move = np.zeros(end.shape)
+    move[frames] = middle - points[:, 1]
+    out[:, chain[1]] += gaussian_average(move, HINGE_EASE)
+    out[frames, chain[2]] = goal[frames]
 
 
 def _effector_points(out, hierarchy, skeleton, effector: Effector, captured_pos, captured_rot, pin) -> np.ndarray:
