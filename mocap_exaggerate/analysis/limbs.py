@@ -294,10 +294,9 @@ def behind_line(positions: np.ndarray, joints, pole: np.ndarray) -> tuple[np.nda
     """How far a limb's middle joint is behind its base-to-end line (F,) (negative: in front, the way
     ``pole`` (F, 3) points), and the unit way to the front across the line (F, 3)."""
     base, middle, end = (positions[:, j] for j in joints)
+    offset = offset_from_line(base, middle, end)
     line = end - base
     line = line / np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
-    offset = middle - base
-    offset = offset - np.sum(offset * line, axis=-1, keepdims=True) * line
     side = pole - np.sum(pole * line, axis=-1, keepdims=True) * line
     side = side / np.maximum(np.linalg.norm(side, axis=-1, keepdims=True), 1e-12)
     return -np.sum(offset * side, axis=-1), side

@@ -78,7 +78,7 @@ def motion_quality(motion: Motion, result) -> dict:
         motion = motion.slice(slice(result.rest_frames, None))
     skeleton, dt = motion.skeleton, motion.frame_time
     h = skeleton.height()
-    cap = motion.world_positions()
+    cap_rot, cap = motion.forward_kinematics()
     out_all = result.world_positions
     out = out_all[:, result.original_index]
 
@@ -134,7 +134,7 @@ def motion_quality(motion: Motion, result) -> dict:
         limb = limbs.get(name)
         if limb is None or len(limb.joints) != 3:
             continue
-        pole = hinge_pole(cap[:, list(limb.joints)], motion.world_rotations()[:, limb.base])
+        pole = hinge_pole(cap[:, list(limb.joints)], cap_rot[:, limb.base])
         if pole is not None:
             backwards += int(np.sum((behind_line(out, limb.joints, pole)[0] > 0.01 * h)
                                     & (behind_line(cap, limb.joints, pole)[0] < 0)))

@@ -109,10 +109,10 @@ def strike_candidates(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: 
     span = max(3, int(round(window / frame_time)))
     near = max(1, int(round(0.1 / frame_time)))  # a peak is the highest reach 0.1 s either side
     soon = int(round(0.15 / frame_time))  # a foot landing this soon after full reach: a step
-    down = _torso_down(world_pos, limbs)
     up = np.zeros(3)
     axis, sign = standing_up(skeleton, world_pos[:: max(1, frames // 200)])
     up[axis] = sign
+    down = _torso_down(world_pos, limbs, up)
     found: dict[str, list[dict]] = {}
     for name, limb in limbs.items():
         if not name.endswith(("_arm", "_leg")):
@@ -213,10 +213,10 @@ def _pair_of(name: str) -> str:
     return f"{'right' if side == 'left' else 'left'}_{kind}"
 
 
-def _torso_down(world_pos: np.ndarray, limbs: dict) -> np.ndarray:
-    """(F, 3) unit: from the top of the spine toward the hips (the world's -Y without a spine)."""
+def _torso_down(world_pos: np.ndarray, limbs: dict, up: np.ndarray) -> np.ndarray:
+    """(F, 3) unit: from the top of the spine toward the hips (straight down, ``-up``, without a spine)."""
     spine = limbs.get("spine")
     if spine is None:
-        return np.broadcast_to(np.array([0.0, -1.0, 0.0]), world_pos.shape[:1] + (3,))
+        return np.broadcast_to(-up, world_pos.shape[:1] + (3,))
     down = world_pos[:, spine.base] - world_pos[:, spine.end]
     return down / np.maximum(np.linalg.norm(down, axis=-1, keepdims=True), 1e-12)
