@@ -6,17 +6,20 @@ Here, after the contacts, targets and stretch keys and before the floor:
 
 - `keep_out`: each hand, forearm, foot and shin is pushed out of the torso, pelvis, head and
   thighs (`mocap_exaggerate.analysis.body`) by as much as it is deeper in than the captured
-  one at that frame, the shortest way (away from the capsule's axis), eased in time so the
-  push never falls short on a frame and grows and fades over ``ramp`` frames; the limb's
-  end moves and its chain bends to follow, as for a contact;
-- `unbend_hinges`: a knee or elbow on the wrong side of its limb's base-to-end line (the
-  side opposite the one the captured joint bends to, `hinge_pole`) is brought back onto the
-  line, eased the same way, the sub-joints on both its links moving with it.
+  one at that frame, the shortest way (the captured part's side near the capsule's axis),
+  eased in time so the push never falls short on a frame and grows and fades over `EASE`
+  contact ramps (twice that for a planted leg's knee or the body); the limb's end moves and
+  its chain bends to follow, as for a contact;
+- `unbend_hinges`: a knee or elbow further behind its limb's base-to-end line than the
+  captured one (against the side the captured joint bends to, `hinge_pole`) is brought back
+  to the line by a C1 clip of the excess, frame by frame, the sub-joints on both its links
+  moving with it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
@@ -24,7 +27,7 @@ from ..analysis.body import body_capsules, captured_sides, limb_parts, penetrati
 from ..analysis.limbs import behind_line
 from ..core.timing import end_ramp, gaussian_average, spread_max
 
-__all__ = ["keep_out", "unbend_hinges", "eased_push", "move_middle", "EASE"]
+__all__ = ["Body", "prepare_body", "keep_out", "unbend_hinges", "eased_push", "move_middle", "EASE"]
 
 #: A push out of the body grows and fades over this many contact ramps (contacts.blend, 0.15 s): a hand
 #: swinging past the hips is in the pelvis for a few frames, and pushed out over so few it shook.
@@ -49,7 +52,36 @@ def eased_push(push: np.ndarray, ramp: int) -> np.ndarray:
     return np.where(length > 0, spread[:, None] * direction / np.maximum(length, 1e-300), 0.0)
 
 
-def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, captured_pos: np.ndarray, ramp: float,
+class Body(NamedTuple):
+    """What the body pass needs of the capture, found once per run (`prepare_body`).
+
+    capsules, parts : the body's capsules and the moving parts (`mocap_exaggerate.analysis.body`)
+    captured_depth : part -> (F,) how deep the captured part is (0 outside)
+    sides : `captured_sides`, the way from each capsule's axis to each captured part
+    margin : how far past the surface a part is pushed (5 % of the thinnest capsule)
+    limbs : the limbs with parts, in a fixed order (each one's push moves the next one's body)
+    """
+
+    capsules: list
+    parts: list
+    captured_depth: dict[str, np.ndarray]
+    sides: dict
+    margin: float
+    limbs: tuple[str, ...]
+
+
+def prepare_body(limbs: dict, captured_pos: np.ndarray) -> Body | None:
+    """The capture's side of the body pass; None for a skeleton without both arms or both legs."""
+    capsules = body_capsules(limbs, captured_pos)
+    if not capsules:
+        return None
+    parts = limb_parts(limbs)
+    depth = {name: np.maximum(found[0], 0.0) for name, found in penetrations(captured_pos, capsules, parts).items()}
+    return Body(capsules, parts, depth, captured_sides(captured_pos, capsules, parts),
+                0.05 * min(capsule.radius for capsule in capsules), tuple(dict.fromkeys(p.limb for p in parts)))
+
+
+def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Body, ramp: float,
              pins: dict[int, np.ndarray], move_end: Callable[[np.ndarray, object, np.ndarray], None],
              chain_of: Callable[[tuple[int, ...]], np.ndarray], rounds: int = 6,
              asked: dict[int, np.ndarray] | None = None) -> dict[str, int]:
@@ -61,87 +93,73 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, captured_
     the user put somewhere (``asked``: a target, a stretch's length; joint -> (F,) weight) is left there.
     Returns the frames each part was pushed on, by part.
     """
-    capsules = body_capsules(limbs, captured_pos)
-    if not capsules:
-        return {}
-    parts = limb_parts(limbs)
-    margin = 0.05 * min(capsule.radius for capsule in capsules)
-    captured_depth = {name: np.maximum(found[0], 0.0) for name, found in
-                      penetrations(captured_pos, capsules, parts).items()}
     original = hierarchy.original
     pushed: dict[str, int] = {}
     # A push may swing a limb out, or lengthen it to at most its longest elsewhere in the clip.
-    longest = {name: float(np.linalg.norm(out[:, original[limb.end]] - out[:, original[limb.base]], axis=-1).max())
-               for name, limb in limbs.items() if name in {part.limb for part in parts}}
-    sides = captured_sides(captured_pos, capsules, parts)
+    longest = {name: float(np.linalg.norm(out[:, original[limbs[name].end]] - out[:, original[limbs[name].base]],
+                                          axis=-1).max()) for name in body.limbs}
+    span = int(round(EASE * ramp))
+    nothing = np.zeros(len(out))
     for _ in range(rounds):
-        found = penetrations(out[:, original], capsules, parts, reference=sides)
+        found = penetrations(out[:, original], body.capsules, body.parts, reference=body.sides)
         moved = False
-        for limb_name in {part.limb for part in parts}:
+        for limb_name in body.limbs:
             limb = limbs[limb_name]
             if limb.end not in effectors:
                 continue
             upper = np.linalg.norm(out[:, original[limb.joints[1]]] - out[:, original[limb.joints[0]]], axis=-1)
             lower = np.linalg.norm(out[:, original[limb.joints[2]]] - out[:, original[limb.joints[1]]], axis=-1)
             push = np.zeros((len(out), 3))
-            bend = np.zeros((len(out), 3))  # the middle joint's share, for a planted end that cannot move
+            bend = np.zeros((len(out), 3))  # the middle joint's, for a planted end that cannot move
             lift = np.zeros((len(out), 3))  # the body's, for a planted shin in the trunk (sat down onto it)
-            middle = np.zeros((len(out), 3))  # the middle joint's, beyond what the end's move takes it
-            for part in (p for p in parts if p.limb == limb_name):
+            for part in (p for p in body.parts if p.limb == limb_name):
                 depth, away, along, trunk = found[part.name]
                 # Deeper than the capture goes: out to it and a little past (the floor and the evening of
                 # sub-links come after); nothing where it is no deeper.
-                excess = depth - captured_depth[part.name]
-                need = np.where((depth > 0) & (excess > 0), excess + margin, 0.0)
+                excess = depth - body.captured_depth[part.name]
+                need = np.where((depth > 0) & (excess > 0), excess + body.margin, 0.0)
                 if not np.any(need > 0):
                     continue
                 pushed[part.name] = pushed.get(part.name, 0) + int(np.sum(need > 0))
                 out_of = need[:, None] * away
-                side = limb_name.split("_")[0]
-                if part.a == part.b and {f"{side}_upper_arm", f"{side}_thigh"} & set(part.avoid):
+                if part.a == part.b:
                     # An end folded into its own upper bone: the middle joint follows the end by its share
                     # of the chain, so they part by the rest.
-                    wanted = out_of / np.maximum(lower / np.maximum(upper + lower, 1e-12), 0.5)[:, None]
-                    middle_wanted = np.zeros_like(out_of)
+                    share = lower / np.maximum(upper + lower, 1e-12)
                 else:
                     # A point along a forearm or shin moves by about its share of the chain's length of the
-                    # end's move (the chain bends by shares of it): the end moves that much further, at most
-                    # twice. (Moving the elbow or knee out as well bent it backwards.)
+                    # end's move (the chain bends by shares of it): the end moves that much further. (Moving
+                    # the elbow or knee out as well bent it backwards.)
                     share = (upper + along * lower) / np.maximum(upper + lower, 1e-12)
-                    wanted = out_of / np.maximum(share, 0.5)[:, None]
-                    middle_wanted = np.zeros_like(out_of)
-                bigger = np.linalg.norm(wanted, axis=-1) > np.linalg.norm(push, axis=-1)
-                push = np.where(bigger[:, None], wanted, push)
-                middle = np.where(bigger[:, None], middle_wanted, middle)
-                if part.a != part.b:  # with the end held, the middle joint moves it: by 1 - along of the way
-                    wanted = (need / np.maximum(1.0 - along, 0.5))[:, None] * away
-                    bigger = np.linalg.norm(wanted, axis=-1) > np.linalg.norm(bend, axis=-1)
-                    bend = np.where(bigger[:, None], wanted, bend)
+                    # With the end held, the middle joint moves it: by 1 - along of the way.
+                    bend = _larger(bend, (need / np.maximum(1.0 - along, 0.5))[:, None] * away)
+                push = _larger(push, out_of / np.maximum(share, 0.5)[:, None])
                 # Near its held end (a foot, or the shin's lower half in the trunk: sat down onto it) the knee
                 # cannot take it out: the body moves off it instead.
                 near_end = np.ones(len(out), bool) if part.a == part.b else trunk & (along > 0.5)
-                wanted = np.where(near_end[:, None], -out_of, 0.0)
-                bigger = np.linalg.norm(wanted, axis=-1) > np.linalg.norm(lift, axis=-1)
-                lift = np.where(bigger[:, None], wanted, lift)
+                lift = _larger(lift, np.where(near_end[:, None], -out_of, 0.0))
             if not np.any(push):
                 continue
-            pin = pins.get(limb.end)
-            held = np.zeros(len(out)) if pin is None else pin
-            left_alone = 1.0 - (asked or {}).get(limb.end, np.zeros(len(out)))
+            held = pins.get(limb.end, nothing)
+            left_alone = 1.0 - (asked or {}).get(limb.end, nothing)
             # (the eased push spreads in time: weighed again so a target's own frames stay exact)
             free = ((1.0 - held) * left_alone)[:, None]
-            span = int(round(EASE * ramp))
             move_end(out, effectors[limb.end], _no_longer(out[:, original[limb.joints[0]]], out[:, original[limb.end]],
                                                           eased_push(push * free, span) * free, longest[limb_name]))
-            knee = middle * free + bend * held[:, None]
-            if np.any(knee):
-                move_middle(out, chain_of(tuple(limb.joints)), original[limb.joints[1]], eased_push(knee, 2 * span))
-            if pin is not None and np.any(lift * held[:, None]):
+            if np.any(bend * held[:, None]):
+                move_middle(out, chain_of(tuple(limb.joints)), original[limb.joints[1]],
+                            eased_push(bend * held[:, None], 2 * span))
+            if np.any(lift * held[:, None]):
                 _move_body(out, original, limbs, effectors, pins, eased_push(lift * held[:, None], 2 * span), move_end)
             moved = True
         if not moved:
             break
     return pushed
+
+
+def _larger(now: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """(F, 3) per frame the longer of two pushes."""
+    return np.where((np.linalg.norm(wanted, axis=-1) > np.linalg.norm(now, axis=-1))[:, None], wanted, now)
 
 
 def _no_longer(base: np.ndarray, end: np.ndarray, push: np.ndarray, longest: float) -> np.ndarray:
@@ -169,21 +187,21 @@ def _move_body(out: np.ndarray, original: np.ndarray, limbs: dict, effectors: di
         move_end(out, effectors[end], out[:, original[end]] + weight * (where - out[:, original[end]]))
 
 
-def unbend_hinges(out: np.ndarray, hierarchy, limbs: dict, poles: dict[str, np.ndarray], captured_pos: np.ndarray,
+def unbend_hinges(out: np.ndarray, hierarchy, limbs: dict, poles: dict[str, tuple[np.ndarray, np.ndarray]],
                   chain_of: Callable[[tuple[int, ...]], np.ndarray]) -> dict[str, int]:
     """Bring knees and elbows bent the wrong way back to their limb's line (in place on ``out``).
 
-    poles : limb name -> (F, 3) the side its middle joint bends to (`hinge_pole`, from the capture);
-    captured_pos : (F, J, 3) the capture: a joint is brought back only as far as it is further behind
-    than the captured one (the capture's own overextension stays); chain_of : the rubber chain
-    (hierarchy indices, base to end) of an original chain. Returns the frames each limb was unbent on.
+    poles : limb name -> ((F, 3) the side its middle joint bends to (`hinge_pole`, from the capture),
+    (F,) how far the captured joint is behind its line (`behind_line`)): a joint is brought back only
+    as far as it is further behind than the captured one (the capture's own overextension stays);
+    chain_of : the rubber chain (hierarchy indices, base to end) of an original chain. Returns the
+    frames each limb was unbent on.
     """
     original = hierarchy.original
     done: dict[str, int] = {}
-    for name, pole in poles.items():
+    for name, (pole, captured) in poles.items():
         limb = limbs[name]
         behind, side = behind_line(out[:, original], limb.joints, pole)
-        captured, _ = behind_line(captured_pos, limb.joints, pole)
         excess = behind - np.maximum(captured, 0.0)
         if not np.any(excess > 0):
             continue

@@ -40,13 +40,13 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from ..analysis.branches import incoming_joint, minor_branches, rider_joints, rubber_groups
-from ..analysis.limbs import Limb, hinge_pole, offset_from_line
+from ..analysis.limbs import Limb, behind_line, hinge_pole, offset_from_line
 from ..core.errors import ConfigError, check_choice, check_flag, check_number
 from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
 from ..core.timing import check_duration, gaussian_average, parse_duration, parse_frame, smootherstep, spread_max
-from .collide import keep_out, unbend_hinges
+from .collide import keep_out, prepare_body, unbend_hinges
 from .state import Pins
 from .subjoints import even_out
 
@@ -789,10 +789,15 @@ def constrain(
     if config.enabled and config.collide:
         # Knees and elbows the captured way, then the limbs out of the body; the floor has the last say, and
         # a hand lifted off it (a scoop) can fold into the body again: out of the body once more, then the floor.
-        hinges = {name: pole_of(effectors[limb.end]) for name, limb in limbs.items()
-                  if name in LIMB_HINGES and len(limb.joints) == 3 and limb.end in effectors
-                  and tuple(effectors[limb.end].chain) == tuple(limb.joints)}
-        hinges = {name: pole for name, pole in hinges.items() if pole is not None}
+        hinges = {}
+        for name in LIMB_HINGES:
+            limb = limbs.get(name)
+            if limb is None or limb.end not in effectors or tuple(effectors[limb.end].chain) != tuple(limb.joints):
+                continue
+            pole = pole_of(effectors[limb.end])
+            if pole is not None:
+                hinges[name] = (pole, behind_line(captured_pos, limb.joints, pole)[0])
+        shape = prepare_body(limbs, captured_pos)
 
         def move(points: np.ndarray, effector: Effector, goal: np.ndarray) -> None:
             _move_end(points, hierarchy, effector, goal, rest, pole_of(effector))
@@ -802,14 +807,15 @@ def constrain(
 
         body["unbent"], body["pushed"] = {}, {}
         for _ in range(2 if floor else 1):
-            for kind, done in (("unbent", unbend_hinges(out, hierarchy, limbs, hinges, captured_pos, chain_of)),
-                               ("pushed", keep_out(out, hierarchy, limbs, effectors, captured_pos, ramp, pins, move,
-                                                  chain_of, asked=asked))):
+            unbent = unbend_hinges(out, hierarchy, limbs, hinges, chain_of)
+            pushed = keep_out(out, hierarchy, limbs, effectors, shape, ramp, pins, move, chain_of,
+                              asked=asked) if shape is not None else {}
+            for kind, done in (("unbent", unbent), ("pushed", pushed)):
                 for name, count in done.items():
                     body[kind][name] = max(body[kind].get(name, 0), count)
             if floor:
                 lift_ends()
-        unbend_hinges(out, hierarchy, limbs, hinges, captured_pos, chain_of)  # what the floor's lifts bent back
+        unbend_hinges(out, hierarchy, limbs, hinges, chain_of)  # what the floor's lifts bent back
     elif floor:
         lift_ends()
 
