@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import tomllib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -28,6 +27,18 @@ def cell(value, fmt: str = ".2f") -> str:
     return "-" if value is None else format(value, fmt)
 
 
+def settings_table(items) -> dict:
+    """``--set`` pairs as the CLI reads them (`mocap_exaggerate_cli.options.settings_table`)."""
+    import click
+
+    from mocap_exaggerate_cli.options import settings_table as table
+
+    try:
+        return table(tuple(items))
+    except click.BadParameter as error:
+        raise SystemExit(f"--set: {error.message}") from None
+
+
 def run_bench(description: str, measure: Callable[[Path, str], dict], table: Callable[[str, list], None], *,
               presets: str) -> None:
     """Parse ``--presets --clips --data --json``, measure every clip with every preset, print the tables."""
@@ -39,13 +50,7 @@ def run_bench(description: str, measure: Callable[[Path, str], dict], table: Cal
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="a setting laid over each preset, e.g. subjoints.enabled=false (repeatable)")
     args = parser.parse_args()
-    for item in args.set:
-        key, _, value = item.partition("=")
-        where = OVERRIDES
-        *parents, last = key.strip().split(".")
-        for name in parents:
-            where = where.setdefault(name, {})
-        where[last] = tomllib.loads(f"v = {value.strip()}")["v"]
+    OVERRIDES.update(settings_table(args.set))
     wanted = [s for s in args.clips.split(",") if s]
     clips = [p for p in sorted(args.data.glob("*.bvh")) if not wanted or any(s in p.name for s in wanted)]
     if not clips:

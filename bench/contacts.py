@@ -35,9 +35,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from common import FPS, cell, run_bench
+from common import FPS, cell, preset_config, run_bench
 
-from mocap_exaggerate import load_bvh, load_preset
+from mocap_exaggerate import load_bvh
 from mocap_exaggerate.analysis.limbs import find_limbs
 from mocap_exaggerate.pipeline import run
 
@@ -86,7 +86,7 @@ def measure(result, cap: np.ndarray, ctx: dict, seconds: float) -> dict:
 
 def clip_figures(path: Path, preset: str) -> dict:
     fps = FPS.get(path.name)
-    config = load_preset(preset)
+    config = preset_config(preset)
     motion = load_bvh(path, fps=fps)
     configs = {"off": config}
     if hasattr(config, "contacts"):

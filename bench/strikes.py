@@ -18,11 +18,12 @@ import json
 import sys
 from pathlib import Path
 
-from common import FPS, ROOT, SHARED
+from common import FPS, ROOT, SHARED, settings_table
 
 from mocap_exaggerate import load_bvh
 from mocap_exaggerate.analysis.limbs import find_limbs
-from mocap_exaggerate.stages.stretch import AutoStretchConfig, find_strikes, weigh_strikes
+from mocap_exaggerate.config import PipelineConfig
+from mocap_exaggerate.stages.stretch import find_strikes, weigh_strikes
 
 LABELS = ROOT / "tests" / "data" / "strikes.json"
 #: How far (seconds) a found strike's frame of full reach may be from the label's.
@@ -51,13 +52,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", type=Path, default=None, help="also write every figure here")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="an auto_stretch setting, e.g. min_angle=35 (repeatable)")
+                        help="an auto_stretch setting, e.g. auto_stretch.min_angle=35 (repeatable)")
     args = parser.parse_args()
-    values = {}
-    for item in args.set:
-        key, _, value = item.partition("=")
-        values[key.strip()] = float(value)
-    config = AutoStretchConfig(enabled=True, **values)
+    table = settings_table(args.set)
+    config = PipelineConfig.from_dict({"auto_stretch": {**table.get("auto_stretch", {}), "enabled": True}},
+                                      source="--set").auto_stretch
     labels = json.loads(LABELS.read_text())["clips"]
     totals = {"hits": 0, "missed": 0, "extra": 0, "labels": 0}
     rows = {}

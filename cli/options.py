@@ -75,10 +75,16 @@ def parsed_one(parse: Callable[[str], Any]) -> Callable:
 
 
 def parse_settings(ctx, param, values: tuple[str, ...]) -> dict[str, Any]:
-    """``--set block.key=value`` pairs as a nested table; the config checks the keys and values."""
+    """``--set block.key=value`` pairs as a nested table (`settings_table`), their words kept."""
+    _keep_raw(ctx, param, values)
+    return settings_table(values)
+
+
+def settings_table(values) -> dict[str, Any]:
+    """``block.key=value`` pairs as a nested table: each value TOML (``3``, ``true``, ``[1, 2]``) or plain
+    text (``0.2s``, ``looney``); the config checks the keys and values. ``click.BadParameter`` otherwise."""
     import tomllib
 
-    _keep_raw(ctx, param, values)
     table: dict[str, Any] = {}
     for item in values:
         key, sep, text = item.partition("=")
