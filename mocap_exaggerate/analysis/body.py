@@ -7,7 +7,7 @@ a mesh, the body is a few capsules around the skeleton's own links, sized from t
 
 - the torso: each link of the spine, radius 0.3 shoulders; the pelvis: hip joint to hip
   joint, radius 0.45 hips; the head: the neck's last link carried on past the head joint by
-  its own length, radius 0.3 shoulders; each thigh: 0.35 hips;
+  its own length, radius 0.3 shoulders; each thigh: 0.35 hips; each upper arm: 0.2 shoulders;
 - the parts that move into them: each forearm (elbow to wrist, and the wrist as the hand)
   and each shin (knee to ankle, and the ankle as the foot).
 
@@ -15,7 +15,7 @@ A part is *inside* a capsule when its axis comes within the capsule's radius of 
 capsule's axis: a limb grazing the body's surface is not counted, one passing into it is.
 Each part is tested against the torso, the pelvis and the head, a leg's against the other
 leg's thigh, and each end (wrist, ankle) against its own limb's upper bone (a shin folded
-into its thigh). `inside_body` counts frames; `mocap_exaggerate.stages.contacts` pushes the
+into its thigh). `inside_body` counts frames; `mocap_exaggerate.stages.collide` pushes the
 parts out of what the capture's do not enter.
 """
 
@@ -30,7 +30,7 @@ __all__ = ["Capsule", "Part", "body_capsules", "limb_parts", "segment_closest", 
 
 
 class Capsule(NamedTuple):
-    """A capsule of the body: ``joints`` (a, b) its axis's ends (``b`` may be carried past a joint by
+    """A capsule of the body: joints ``a`` and ``b`` at its axis's ends (``b`` carried past its joint by
     ``extend`` of the a-b length), ``radius`` in the skeleton's units."""
 
     name: str
@@ -46,8 +46,8 @@ class Capsule(NamedTuple):
 
 
 class Part(NamedTuple):
-    """A moving part: the segment (a, b) of ``limb`` (a == b for a point), the capsules it must stay out of,
-    and ``end``, the limb's end effector that moves it."""
+    """A moving part: the segment (a, b) of ``limb`` (a == b for a point: the wrist or ankle, which keeps out
+    only of its own limb's upper bone), and ``avoid``, the names of the capsules it must stay out of."""
 
     name: str
     limb: str
@@ -139,19 +139,17 @@ def captured_sides(reference: np.ndarray, capsules: list[Capsule], parts: list[P
 
 
 def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Part],
-                 reference: np.ndarray | dict | None = None) -> dict[str, tuple]:
+                 reference: dict | None = None) -> dict[str, tuple]:
     """Per part, how deep it is in the body at each frame: ``(depth (F,), away (F, 3) unit, along (F,),
     trunk (F,) bool)``: the most any of its capsules' radius exceeds the distance between the axes (<= 0:
     outside), the way out from that capsule's axis at the closest point, where along the part (0 at its
     first joint), and whether that capsule is the torso, pelvis or head.
 
-    reference : (F, J, 3) the capture, or its `captured_sides`: where the part is near the capsule's
+    reference : the capture's `captured_sides`: where the part is near the capsule's
         axis (within half its radius) the way out is then the side the captured part is on, so a part
         passing through the axis is not pushed one way and then the other; elsewhere its own shortest
         way (pushed back across the body to the captured side, a hand went round and round it).
     """
-    if reference is not None and not isinstance(reference, dict):
-        reference = captured_sides(reference, capsules, parts)
     by_name: dict[str, list[tuple[int, Capsule]]] = {}
     for index, capsule in enumerate(capsules):
         by_name.setdefault(capsule.name, []).append((index, capsule))

@@ -658,7 +658,7 @@ class ConstraintResult(NamedTuple):
     contacts: dict[str, list[list[int]]]
     ground: Ground | None
     keys: list[dict]
-    body: dict[str, dict[str, int]] = {}
+    body: dict[str, dict[str, int]]
 
 
 def sub_chain(hierarchy, chain: tuple[int, ...]) -> np.ndarray:

@@ -681,9 +681,10 @@ def stretch_stage(state: State, plan: StretchPlan) -> State:
     # S means the captured limb: the factor on the exaggerated limb that makes it S times its captured length.
     declared = [captured_scale(spec, state.captured_pos, state.positions, motion.skeleton, state.limbs,
                                motion.frame_time) for spec in plan.specs]
-    asked = {(spec.limb, str(spec.start), str(spec.end)): spec.scale for spec in plan.specs}
+    asked = {(spec.limb, spec.frames(motion.frame_time, motion.num_frames)): spec.scale for spec in plan.specs
+             if spec.limb in state.limbs}  # (a limb the skeleton lacks is refused by apply_stretches)
     specs = declared + list(specs_for_paths(state.paths or {}, plan.specs))
-    if not specs and not plan.auto.enabled:
+    if not specs and not plan.auto.enabled:  # (edited paths too short to be an event)
         return state
     notes = list(state.notes)
     reaches: dict[tuple[str, int, int], float] = {}
@@ -713,10 +714,8 @@ def stretch_stage(state: State, plan: StretchPlan) -> State:
         reach = reaches.get((event.limb, *event.frames))
         if reach is not None:  # a found strike: its style is the reach it ends at, in limb lengths
             event = replace(event, reach=reach)
-        spec = next((d for d, o in zip(declared, plan.specs)
-                     if d.limb == event.limb and d.frames(motion.frame_time, motion.num_frames) == event.frames), None)
-        if spec is not None:
-            event = replace(event, captured=float(asked[spec.limb, str(spec.start), str(spec.end)]))
+        if (event.limb, event.frames) in asked:  # a declared one: S as asked, against the captured limb
+            event = replace(event, captured=float(asked[event.limb, event.frames]))
         events.append(event)
         if event.axes_relaxed:
             notes.append(
