@@ -70,6 +70,24 @@ def test_rest_pose_detection_on_real_clips(path):
     assert detect_rest_frames(motion) == EXPECTED_REST_FRAMES.get(path.stem, 0)
 
 
+def test_a_first_frame_the_root_teleports_from_is_a_rest_frame_whatever_its_pose():
+    # CMU 07_04 (iClone): frame 0 stands at the origin in the clip's own pose (every iClone joint is
+    # turned 180 degrees from identity, so the T-pose test cannot see it), then the root jumps 1.59
+    # heights to where the walk starts. One frame, not the walk's first steps.
+    motion = load_bvh(shared("wide/cmu_07_04_slow_walk_iclone.bvh"))
+    assert detect_rest_frames(motion) == 1
+    # The same teleport put on a clip that starts well: the sample jump's frame 0 moved 0.3 heights.
+    jump = load_bvh(ROOT_SAMPLE / "cmu_16_01_jump_amc2bvh.bvh")
+    assert detect_rest_frames(jump) == 0
+    local = jump.local_positions.copy()
+    local[0, 0, 0] -= 0.3 * jump.skeleton.height()
+    assert detect_rest_frames(replace(jump, local_positions=local)) == 1
+    local[0, 0, 0] += 0.2 * jump.skeleton.height()  # 0.1 heights: a fast step, not a teleport
+    assert detect_rest_frames(replace(jump, local_positions=local)) == 0
+    # A fast run's real steps (0.056 heights at most over the shared clips) are not a teleport.
+    assert detect_rest_frames(load_bvh(shared("cmu_09_01_run_daz.bvh"))) == 4
+
+
 def test_rest_frames_are_written_unchanged_and_kept_out_of_the_filter(sample_clip):
     motion, _ = read_bvh(sample_clip)
     auto = run(motion, load_preset("cartoon"))
