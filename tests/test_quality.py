@@ -22,7 +22,7 @@ from .helpers import shared_clip_params
 JERK = {"subtle": 1.5, "cartoon": 2.0, "looney": 3.0}
 #: The ranges the presets' descriptions promise (README, "Presets"): the longest any arm or leg
 #: gets, and the longest the spine or neck gets, in rest lengths.
-LIMBS = {"subtle": 1.15, "cartoon": 1.5, "looney": 2.5}
+LIMBS = {"subtle": 1.15, "cartoon": 1.5, "looney": 1.75}
 TORSO = {"subtle": 1.05, "cartoon": 1.05, "looney": 1.15}
 
 

@@ -13,9 +13,12 @@ from mocap_exaggerate.stages.springs import (
     DAMPING_RANGE,
     STIFFNESS_RANGE,
     SpringConfig,
+    limit_stretch,
     simulate_springs,
     substeps_for,
 )
+
+from .helpers import shared
 
 CHAIN = np.array([-1, 0, 1, 2, 3])
 SETTINGS = dict(stiffness=150.0, link_stiffness=150.0, damping=6.0)
@@ -112,7 +115,7 @@ def test_stable_for_every_value_the_cli_accepts(stiffness, link_stiffness, dampi
 
 
 @pytest.mark.parametrize("field, value", [("stiffness", -1.0), ("link_stiffness", 2e5), ("damping", -0.1),
-                                          ("blend", 1.5)])
+                                          ("blend", 1.5), ("max_stretch", 0.9)])
 def test_config_validates_naming_the_field(field, value):
     with pytest.raises(ConfigError, match=f"springs.{field}"):
         SpringConfig(**{field: value})
@@ -133,3 +136,45 @@ def test_blend_per_joint():
     assert np.allclose(ramp[:, 3:], full[:, 3:])  # the same share: the same result
     half = (ramp[:, 2] - positions[:, 2]) / np.where(full[:, 2] == positions[:, 2], 1.0, full[:, 2] - positions[:, 2])
     assert np.allclose(half[1:], 0.5)  # half the share, half the lag
+
+
+def test_the_lag_stretches_a_link_softly_to_its_most_and_the_chain_below_follows():
+    # A chain of unit links along Y; the springs stretched link 2 to 3x (frame 1) and 1.2x (frame 0).
+    rest_pose = np.stack([np.zeros(5), np.arange(5.0), np.zeros(5)], 1)
+    before = np.stack([rest_pose, rest_pose])
+    after = before.copy()
+    after[0, 2:, 1] += 0.2
+    after[1, 2:, 1] += 2.0
+    after[1, 4, 0] += 0.5  # the last link also turned: it keeps its own vector
+    lengths = np.linalg.norm(np.diff(rest_pose, axis=0), axis=-1)
+    rest = np.concatenate([[0.0], lengths])
+    out = limit_stretch(after, before, CHAIN, rest, np.array([1, 2, 3, 4]), 2.0)
+    # Under the knee (1.5x: half way from the rest length to the most) nothing moves, to the bit.
+    assert np.array_equal(out[0], after[0])
+    # Above it, a tanh into 2x: 1.5 + 0.5 tanh(1.5 / 0.5) = 1.9975, along the link's own direction.
+    assert np.linalg.norm(out[1, 2] - out[1, 1]) == pytest.approx(1.5 + 0.5 * np.tanh(3.0))
+    assert np.allclose(out[1, 2, [0, 2]], 0.0)
+    # Everything below moved with it: the links after it are as the springs left them.
+    assert np.allclose(np.diff(out[1, 2:], axis=0), np.diff(after[1, 2:], axis=0))
+    assert np.array_equal(out[:, :2], after[:, :2])
+    # A link the stretch pass had already made 3x long keeps that: the springs add nothing past it.
+    longer = before.copy()
+    longer[:, 2:, 1] += 2.0
+    assert np.allclose(limit_stretch(after, longer, CHAIN, rest, np.array([1, 2, 3, 4]), 2.0), after)
+    # Links not swung are left alone.
+    assert np.array_equal(limit_stretch(after, before, CHAIN, rest, np.array([1, 3]), 2.0), after)
+
+
+def test_no_link_of_a_looney_dance_stretches_past_the_presets_range():
+    # The iClone pirouette at looney: a hand lagging behind a fast elbow stretched the forearm 2.42x
+    # (the preset's follow-through is held to 1.75x, the correction's free stretch to 1.5x).
+    motion, _ = read_bvh(shared("wide/cmu_05_11_dance_sideways_pirouette_iclone.bvh"))
+    config = load_preset("looney")
+    result = run(motion, config)
+    parents = motion.skeleton.parents
+    captured = motion.world_positions()
+    out = result.world_positions[:, result.original_index]
+    ratio = (np.linalg.norm(out[:, 1:] - out[:, parents[1:]], axis=-1)
+             / np.maximum(np.linalg.norm(captured[:, 1:] - captured[:, parents[1:]], axis=-1), 1e-9))
+    assert ratio.max() <= config.springs.max_stretch
+    assert ratio.max() > 1.5  # still rubber: the lag stretches past the correction's free stretch

@@ -5,7 +5,8 @@ by `parse_duration` and `parse_frame`; `gaussian_average` is Kwon and Lee's
 trajectory average (an FFT convolution with point-reflected ends);
 `spread_max` and `step_gain` ease a per-frame need over a radius (the speed
 limit, the correction, the contacts); `smootherstep` and `end_ramp` fade in
-and out. Every stage that works along time uses these.
+and out; `soft_limit` eases a length into its most (the springs' lag, a
+planted foot's reach). Every stage that works along time uses these.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 from .errors import ConfigError
 
 __all__ = ["parse_duration", "check_duration", "parse_frame", "gaussian_average", "step_gain", "spread_max",
-           "smootherstep", "end_ramp"]
+           "smootherstep", "end_ramp", "soft_limit"]
 
 _DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(s|ms|f|frames?)?\s*$")
 
@@ -176,6 +177,21 @@ def smootherstep(x: np.ndarray) -> np.ndarray:
     """``6x^5 - 15x^4 + 10x^3`` on [0, 1], clamped: 0 to 1 with zero first and second derivatives at both ends."""
     x = np.clip(x, 0.0, 1.0)
     return x * x * x * (x * (6.0 * x - 15.0) + 10.0)
+
+
+def soft_limit(value: np.ndarray, knee: np.ndarray, top: np.ndarray) -> np.ndarray:
+    """``value`` unchanged up to ``knee``, above it easing into ``top`` (never reached): ``knee + (top - knee)
+    tanh((value - knee) / (top - knee))``, continuous with its first derivative; where ``top <= knee``,
+    a hard ``min(value, top)``. All arrays broadcast together.
+
+    >>> np.round(soft_limit(np.array([1.0, 1.5, 2.0, 9.0]), 1.5, 2.0), 3).tolist()
+    [1.0, 1.5, 1.881, 2.0]
+    """
+    value, knee, top = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (value, knee, top)))
+    room = top - knee
+    over = value - knee
+    eased = knee + room * np.tanh(np.divide(over, room, out=np.zeros_like(over), where=room > 0))
+    return np.where(over <= 0, value, np.where(room > 0, eased, np.minimum(value, top)))
 
 
 def end_ramp(frames: int, length: float) -> np.ndarray:

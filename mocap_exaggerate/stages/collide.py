@@ -60,6 +60,8 @@ class Body(NamedTuple):
     sides : `captured_sides`, the way from each capsule's axis to each captured part
     margin : how far past the surface a part is pushed (5 % of the thinnest capsule)
     limbs : the limbs with parts, in a fixed order (each one's push moves the next one's body)
+    root : (F, 3) the captured root: a body moved off a knelt-on shin goes at most back to it, and
+        ``slack`` past it (10 % of the longer captured leg, about 5 % of the height; `_back_to`)
     """
 
     capsules: list
@@ -68,6 +70,8 @@ class Body(NamedTuple):
     sides: dict
     margin: float
     limbs: tuple[str, ...]
+    root: np.ndarray
+    slack: float
 
 
 def prepare_body(limbs: dict, captured_pos: np.ndarray) -> Body | None:
@@ -77,8 +81,12 @@ def prepare_body(limbs: dict, captured_pos: np.ndarray) -> Body | None:
         return None
     parts = limb_parts(limbs)
     depth = {name: np.maximum(found[0], 0.0) for name, found in penetrations(captured_pos, capsules, parts).items()}
+    legs = [limbs[name].joints for name in ("left_leg", "right_leg") if name in limbs]
+    leg = max((float(np.linalg.norm(np.diff(captured_pos[0, list(joints)], axis=0), axis=-1).sum()) for joints in legs),
+              default=0.0)
     return Body(capsules, parts, depth, captured_sides(captured_pos, capsules, parts),
-                0.05 * min(capsule.radius for capsule in capsules), tuple(dict.fromkeys(p.limb for p in parts)))
+                0.05 * min(capsule.radius for capsule in capsules), tuple(dict.fromkeys(p.limb for p in parts)),
+                captured_pos[:, 0], 0.1 * leg)
 
 
 def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Body, ramp: float,
@@ -91,6 +99,7 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Bod
     ``chain_of`` gives the rubber chain of an original one. A planted end (``pins``, joint -> (F,)
     weight) is not moved on its planted frames: its knee (or elbow) moves the part out instead. An end
     the user put somewhere (``asked``: a target, a stretch's length; joint -> (F,) weight) is left there.
+    A shin knelt on moves the body off it, at most back to where the capture has the root (`Body`).
     Returns the frames each part was pushed on, by part.
     """
     original = hierarchy.original
@@ -98,6 +107,9 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Bod
     # A push may swing a limb out, or lengthen it to at most its longest elsewhere in the clip.
     longest = {name: float(np.linalg.norm(out[:, original[limbs[name].end]] - out[:, original[limbs[name].base]],
                                           axis=-1).max()) for name in body.limbs}
+    # and a knee or elbow moved for a held end keeps each of its links to its longest in the clip.
+    longest_links = {name: [float(np.linalg.norm(out[:, original[b]] - out[:, original[a]], axis=-1).max())
+                            for a, b in zip(limbs[name].joints, limbs[name].joints[1:])] for name in body.limbs}
     span = int(round(EASE * ramp))
     nothing = np.zeros(len(out))
     for _ in range(rounds):
@@ -147,10 +159,14 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Bod
             move_end(out, effectors[limb.end], _no_longer(out[:, original[limb.joints[0]]], out[:, original[limb.end]],
                                                           eased_push(push * free, span) * free, longest[limb_name]))
             if np.any(bend * held[:, None]):
+                base, middle, end = (out[:, original[j]] for j in limb.joints[:3])
+                move = eased_push(bend * held[:, None], 2 * span)
                 move_middle(out, chain_of(tuple(limb.joints)), original[limb.joints[1]],
-                            eased_push(bend * held[:, None], 2 * span))
+                            _links_no_longer(base, middle, end, move, *longest_links[limb_name][:2]))
             if np.any(lift * held[:, None]):
-                _move_body(out, original, limbs, effectors, pins, eased_push(lift * held[:, None], 2 * span), move_end)
+                shift = _back_to(out[:, original[0]], body.root, eased_push(lift * held[:, None], 2 * span), body.slack)
+                if np.any(shift):
+                    _move_body(out, original, limbs, effectors, pins, shift, move_end)
             moved = True
         if not moved:
             break
@@ -173,18 +189,68 @@ def _no_longer(base: np.ndarray, end: np.ndarray, push: np.ndarray, longest: flo
                     goal)
 
 
+def _links_no_longer(base: np.ndarray, middle: np.ndarray, end: np.ndarray, move: np.ndarray, upper: float,
+                     lower: float) -> np.ndarray:
+    """The ``move (F, 3)`` of a chain's middle joint, shortened so neither link gets longer than it is now
+    or than ``upper``/``lower`` (its longest in the clip), whichever is more: the knee swings round
+    instead. (Moved straight out of the trunk for a boxer kneeling on the canvas at looney, a knee
+    stretched his thigh to 2.96x its length and tore the skin.)"""
+    goal = middle + move
+    for anchor, longest in ((base, upper), (end, lower)):
+        reach = goal - anchor
+        then = np.linalg.norm(reach, axis=-1, keepdims=True)
+        now = np.maximum(np.linalg.norm(middle - anchor, axis=-1, keepdims=True), longest)
+        goal = np.where(then > now, anchor + reach * np.divide(now, then, out=np.ones_like(now), where=then > 0), goal)
+    return goal - middle
+
+
+def _back_to(root: np.ndarray, captured_root: np.ndarray, shift: np.ndarray, slack: float) -> np.ndarray:
+    """``shift (F, 3)`` of the body, cut to go no further along its own direction than the way back from
+    ``root`` to ``captured_root`` (F, 3) and ``slack`` past it: nothing where the root is already that far.
+    (Lifted off a knelt-on shin once per round, a looney boxer's hips rose 0.31 heights above the
+    crouch the capture had, on thighs stretched 1.9x; held to the capture itself, an elbow folded in
+    at his kneel popped 2.25x its largest captured step.)"""
+    length = np.linalg.norm(shift, axis=-1)
+    way = np.einsum("fc,fc->f", captured_root - root, shift) / np.where(length > 0, length, 1.0) + slack
+    scale = np.divide(np.clip(way, 0.0, None), length, out=np.zeros_like(length), where=length > 0)
+    return shift * np.minimum(scale, 1.0)[:, None]
+
+
 def _move_body(out: np.ndarray, original: np.ndarray, limbs: dict, effectors: dict, pins: dict[int, np.ndarray],
-               shift: np.ndarray, move_end) -> None:
-    """Move the whole body by ``shift (F, 3)`` (in place), the planted feet staying by their own legs."""
+               shift: np.ndarray, move_end) -> np.ndarray:
+    """Move the whole body by ``shift (F, 3)`` (in place), the planted feet staying by their own legs;
+    returns the shift made.
+
+    The body moves only as far as each planted leg reaches without stretching (straight at its
+    lengths): lifted off a shin it knelt on, a looney boxer rose a quarter of his height above the
+    capture on legs stretched to 1.9x, where the capture was still crouching.
+    """
     stay = {}
     for name in ("left_leg", "right_leg"):
         limb = limbs.get(name)
         if limb is not None and limb.end in pins and limb.end in effectors:
             stay[limb.end] = out[:, original[limb.end]].copy()
+            hip, knee = out[:, original[limb.joints[0]]], out[:, original[limb.joints[1]]]
+            straight = np.linalg.norm(knee - hip, axis=-1) + np.linalg.norm(stay[limb.end] - knee, axis=-1)
+            held = pins[limb.end] > 0
+            share = _share_within(hip - stay[limb.end], shift, straight)
+            shift = shift * np.where(held, share, 1.0)[:, None]
     out += shift[:, None]
     for end, where in stay.items():
         weight = pins[end][:, None]
         move_end(out, effectors[end], out[:, original[end]] + weight * (where - out[:, original[end]]))
+    return shift
+
+
+def _share_within(offset: np.ndarray, shift: np.ndarray, most: np.ndarray) -> np.ndarray:
+    """(F,) the largest share ``t`` in [0, 1] of ``shift (F, 3)`` that keeps ``|offset + t shift|`` within
+    ``most (F,)`` (or within ``|offset|``, where that is already more)."""
+    most = np.maximum(most, np.linalg.norm(offset, axis=-1))
+    a = np.einsum("fc,fc->f", shift, shift)
+    b = np.einsum("fc,fc->f", offset, shift)
+    c = np.einsum("fc,fc->f", offset, offset) - most**2  # <= 0
+    root = (-b + np.sqrt(np.maximum(b * b - a * c, 0.0))) / np.where(a > 0, a, 1.0)
+    return np.where(a > 0, np.clip(root, 0.0, 1.0), 1.0)
 
 
 def unbend_hinges(out: np.ndarray, hierarchy, limbs: dict, poles: dict[str, tuple[np.ndarray, np.ndarray]],

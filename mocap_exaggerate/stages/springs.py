@@ -27,7 +27,7 @@ import numpy as np
 from ..analysis.limbs import limb_hinges, limb_joints
 from ..core.errors import ConfigError, check_flag, check_number
 from ..core.settings import Flag, setting
-from ..core.timing import smootherstep
+from ..core.timing import smootherstep, soft_limit
 from .bends import keep_bends_on_rubber
 from .subjoints import even_out
 
@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from .state import State
 
 __all__ = ["SpringConfig", "SpringLinks", "simulate_springs", "spring_links", "spring_substeps", "stable_link_stiffness",
-           "substeps_for", "STIFFNESS_RANGE", "DAMPING_RANGE", "springs_stage", "hanging_links"]
+           "substeps_for", "limit_stretch", "STIFFNESS_RANGE", "DAMPING_RANGE", "springs_stage", "hanging_links"]
 
 STIFFNESS_RANGE = (0.0, 1e5)
 DAMPING_RANGE = (0.0, 1e4)
@@ -54,6 +54,9 @@ class SpringConfig:
     damping : drag on velocity relative to the follower (1/s); the damping
         ratio is ``damping / (2 sqrt(stiffness))``
     blend : share of the suspended particles in the output; 0 is the identity
+    max_stretch : the lag stretches no sub-link past this factor of its rest
+        length, or past its length before the springs where a stretch or the
+        correction already made it longer (`limit_stretch`)
     """
 
     enabled: bool = setting(True, flag=Flag("--springs/--no-springs", "Switch the follow-through on or off."))
@@ -64,6 +67,9 @@ class SpringConfig:
     damping: float = setting(8.0, flag=Flag("--damping", "Drag on the follow-through, 1/s; higher settles sooner."))
     blend: float = setting(0.5, flag=Flag(
         "--blend", "Share of the simulated follow-through in the result, 0 (none) to 1."))
+    max_stretch: float = setting(2.0, flag=Flag(
+        "--spring-max-stretch", "The follow-through stretches a sub-link at most to this factor of its rest "
+        "length (or its length before the springs, if longer).", metavar="FACTOR"))
 
     def __post_init__(self) -> None:
         check_flag("springs.enabled", self.enabled)
@@ -71,6 +77,7 @@ class SpringConfig:
         check_number("springs.link_stiffness", self.link_stiffness, *STIFFNESS_RANGE)
         check_number("springs.damping", self.damping, *DAMPING_RANGE)
         check_number("springs.blend", self.blend, 0, 1)
+        check_number("springs.max_stretch", self.max_stretch, 1, 10)
         if self.stiffness == 0 and self.damping == 0 and self.blend > 0:
             raise ConfigError("springs: stiffness and damping are both 0, so nothing holds the body; raise one")
 
@@ -328,8 +335,13 @@ def springs_stage(state: State, config: SpringConfig) -> State:
     hinges = limb_hinges(state.motion.skeleton, state.limbs)
     out[state.first:] = keep_bends_on_rubber(out[state.first:], hierarchy, state.captured_pos[state.first:], hinges)
     # The lag bunches sub-joints along a limb as well as bending it: make its sub-links even again.
-    swinging = np.unique(hierarchy.link_child[np.flatnonzero(np.asarray(blend) * active > 0)])
+    swung = np.flatnonzero(np.asarray(blend) * active > 0)
+    swinging = np.unique(hierarchy.link_child[swung])
     out[state.first:] = even_out(out[state.first:], hierarchy, swinging)
+    # A hand lagging behind a fast elbow stretched a looney forearm to 2.4x (the preset says 2x at
+    # most) and tore the skin on it: the lag's stretch is held to max_stretch.
+    out[state.first:] = limit_stretch(out[state.first:], positions[state.first:], parents,
+                                      hierarchy.skeleton.link_lengths(), swung, config.max_stretch)
     substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
     carried = stable_link_stiffness(frame_time, config.link_stiffness, links.degree, substeps)
     notes = state.notes
@@ -337,6 +349,45 @@ def springs_stage(state: State, config: SpringConfig) -> State:
         notes += (f"springs: link stiffness {config.link_stiffness:g} is more than {substeps} substeps per frame "
                   f"can carry at {1 / frame_time:g} fps; used {carried:.4g}",)
     return replace(state, sub_positions=out, substeps=substeps, notes=notes)
+
+
+#: Where `limit_stretch` starts to give: this share of the way from a sub-link's longer length (before
+#: the springs, or at rest) to its most.
+LIMIT_KNEE = 0.5
+
+
+def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray, rest: np.ndarray,
+                  links: np.ndarray, most: float) -> np.ndarray:
+    """``positions`` (F, J, 3) with the links ending at ``links`` no longer than ``most`` times their
+    ``rest`` length, or than in ``before`` (F, J, 3) where that is longer; everything below follows.
+
+    A link is shortened along its own direction, so its bend and turn stay as they were, and a
+    shortened link carries its subtree with it (each joint is its parent plus its own, possibly
+    shortened, link vector: one pass over the joints, parents first). The limit is soft: a link
+    keeps its length up to `LIMIT_KNEE` of the way from its longer of before and rest to its most,
+    and eases into the most above that (a tanh, so the length and its speed stay continuous).
+    """
+    if not len(links):
+        return positions
+    vectors = positions[:, 1:] - positions[:, parents[1:]]
+    length = np.sqrt(np.einsum("fjc,fjc->fj", vectors, vectors))
+    limited = np.zeros(len(parents), bool)
+    limited[links] = True
+    limited = limited[1:]
+    had = np.linalg.norm(before[:, 1:][:, limited] - before[:, parents[1:][limited]], axis=-1)
+    rest = rest[1:][limited]
+    top = np.maximum(had, most * rest)
+    knee = np.minimum(np.maximum(had, rest + LIMIT_KNEE * (top - rest)), top)
+    new_length = soft_limit(length[:, limited], knee, top)
+    scale = np.ones_like(length)
+    scale[:, limited] = np.divide(new_length, length[:, limited], out=np.ones_like(new_length),
+                                  where=length[:, limited] > 0)
+    if np.all(scale == 1.0):
+        return positions
+    shift = np.zeros_like(positions)  # each joint's move: its parent's, plus its own link's shortening
+    for joint in range(1, len(parents)):  # parents come before their children
+        shift[:, joint] = shift[:, parents[joint]] + (scale[:, joint - 1, None] - 1.0) * vectors[:, joint - 1]
+    return positions + shift
 
 
 def hanging_links(skeleton, hierarchy, limbs: dict, blend: float) -> tuple[np.ndarray, np.ndarray | float]:
