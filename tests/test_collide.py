@@ -12,7 +12,7 @@ from mocap_exaggerate.analysis.body import body_capsules, inside_body, limb_part
 from mocap_exaggerate.analysis.limbs import find_limbs
 from mocap_exaggerate.analysis.quality import motion_quality
 from mocap_exaggerate.pipeline import run
-from mocap_exaggerate.stages.collide import eased_push
+from mocap_exaggerate.stages.collide import _back_to, _links_no_longer, _share_within, eased_push
 
 from .helpers import SAMPLE_DIR, shared
 
@@ -84,3 +84,32 @@ def test_the_body_pass_gives_the_same_bytes_whatever_the_hash_seed(tmp_path):
         assert done.returncode == 0, done.stderr
         written.append((out / "assimp_boxing_toes.bvh").read_bytes())
     assert written[0] == written[1]
+
+
+def test_a_knee_moved_for_a_held_foot_keeps_its_links_to_their_longest():
+    hip, knee, foot = np.array([[0.0, 2.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]), np.array([[0.0, 0.0, 0.0]])
+    # Straight out sideways by 1: both links would grow to sqrt(2); the thigh may reach 1.2 (its longest).
+    move = _links_no_longer(hip, knee, foot, np.array([[1.0, 0.0, 0.0]]), 1.2, 1.0)
+    # Where the two balls meet, out to that side: x^2 + y^2 = 1, x^2 + (y - 2)^2 = 1.44 -> y = 0.89.
+    assert np.allclose(knee + move, [[np.sqrt(1 - 0.89**2), 0.89, 0.0]], atol=1e-3)
+    # A move that shortens both links is left as it is.
+    assert np.array_equal(_links_no_longer(hip, knee, foot, np.array([[0.0, 0.0, 0.0]]), 1.0, 1.0), [[0.0, 0.0, 0.0]])
+
+
+def test_the_body_moves_off_a_knelt_on_shin_at_most_back_to_the_capture():
+    root = np.array([[0.0, 0.5, 0.0], [0.0, 0.5, 0.0], [0.0, 1.2, 0.0]])
+    captured = np.array([[0.0, 1.0, 0.0]] * 3)
+    up = np.array([[0.0, 0.3, 0.0], [0.0, 0.8, 0.0], [0.0, 0.3, 0.0]])
+    shift = _back_to(root, captured, up, 0.1)
+    # 0.3 of the 0.6 back (with the slack) is kept; 0.8 is cut to 0.6; a root already above goes nowhere.
+    assert np.allclose(shift, [[0.0, 0.3, 0.0], [0.0, 0.6, 0.0], [0.0, 0.0, 0.0]])
+
+
+def test_a_planted_leg_moves_the_body_no_further_than_it_reaches_straight():
+    # Hip 1 above the foot, the leg 1.5 long when straight: a lift of 1 is cut to 0.5.
+    offset = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    shift = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, -0.5, 0.0]])
+    share = _share_within(offset, shift, np.array([1.5, 1.5, 1.5]))
+    assert share[0] == pytest.approx(0.5)
+    assert share[1] == pytest.approx(1.0)  # sqrt(1 + 1) = 1.41 < 1.5: all of it
+    assert share[2] == pytest.approx(1.0)  # down: shorter

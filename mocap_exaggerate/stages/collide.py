@@ -189,6 +189,10 @@ def _no_longer(base: np.ndarray, end: np.ndarray, push: np.ndarray, longest: flo
                     goal)
 
 
+#: Rounds of `_links_no_longer`'s alternating projections.
+LINK_ROUNDS = 8
+
+
 def _links_no_longer(base: np.ndarray, middle: np.ndarray, end: np.ndarray, move: np.ndarray, upper: float,
                      lower: float) -> np.ndarray:
     """The ``move (F, 3)`` of a chain's middle joint, shortened so neither link gets longer than it is now
@@ -196,11 +200,16 @@ def _links_no_longer(base: np.ndarray, middle: np.ndarray, end: np.ndarray, move
     instead. (Moved straight out of the trunk for a boxer kneeling on the canvas at looney, a knee
     stretched his thigh to 2.96x its length and tore the skin.)"""
     goal = middle + move
-    for anchor, longest in ((base, upper), (end, lower)):
-        reach = goal - anchor
-        then = np.linalg.norm(reach, axis=-1, keepdims=True)
-        now = np.maximum(np.linalg.norm(middle - anchor, axis=-1, keepdims=True), longest)
-        goal = np.where(then > now, anchor + reach * np.divide(now, then, out=np.ones_like(now), where=then > 0), goal)
+    # Each link's ball round its anchor; the middle joint is held in both by alternating projections
+    # (they meet, as the joint is in both now; a few rounds take it within a hair of their common part).
+    balls = [(anchor, np.maximum(np.linalg.norm(middle - anchor, axis=-1, keepdims=True), longest))
+             for anchor, longest in ((base, upper), (end, lower))]
+    for _ in range(LINK_ROUNDS):
+        for anchor, radius in balls:
+            reach = goal - anchor
+            then = np.linalg.norm(reach, axis=-1, keepdims=True)
+            goal = np.where(then > radius, anchor + reach * np.divide(radius, then, out=np.ones_like(then),
+                                                                      where=then > 0), goal)
     return goal - middle
 
 
