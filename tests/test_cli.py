@@ -197,12 +197,13 @@ def test_fps_flag_changes_sigma_in_frames(runner, tmp_path):
 
 def test_rubber_options_and_original_skeleton(runner, sample_clip, tmp_path):
     result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "a"), "--subjoints", "6",
-                                 "--blend", "0.7", "--stiffness", "100", "--damping", "4", "--link-stiffness", "50"])
+                                 "--blend", "0.7", "--stiffness", "100", "--damping", "4", "--link-stiffness", "50",
+                                 "--spring-max-stretch", "1.3"])
     assert result.exit_code == 0, result.stderr
     info = json.loads((tmp_path / "a" / "cmu_09_01_run_daz.json").read_text())
     assert info["config"]["subjoints"]["per_link"] == 6
     assert info["config"]["springs"] == {"enabled": True, "stiffness": 100.0, "link_stiffness": 50.0,
-                                         "damping": 4.0, "blend": 0.7}
+                                         "damping": 4.0, "blend": 0.7, "max_stretch": 1.3}
     assert info["result"]["subjoints"] == read_bvh(tmp_path / "a" / "cmu_09_01_run_daz.bvh")[0].skeleton.num_joints
     assert ["chest", "lCollar", "lShldr", "lForeArm", "lHand"] in info["result"]["groups"]
     result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "b"), "--skeleton", "original"])
