@@ -92,8 +92,14 @@ def test_a_knee_moved_for_a_held_foot_keeps_its_links_to_their_longest():
     move = _links_no_longer(hip, knee, foot, np.array([[1.0, 0.0, 0.0]]), 1.2, 1.0)
     # Where the two balls meet, out to that side: x^2 + y^2 = 1, x^2 + (y - 2)^2 = 1.44 -> y = 0.89.
     assert np.allclose(knee + move, [[np.sqrt(1 - 0.89**2), 0.89, 0.0]], atol=1e-3)
-    # A move that shortens both links is left as it is.
-    assert np.array_equal(_links_no_longer(hip, knee, foot, np.array([[0.0, 0.0, 0.0]]), 1.0, 1.0), [[0.0, 0.0, 0.0]])
+    # On a bent knee, a move toward the hip-foot line shortens both links: it is left as it is.
+    bent = np.array([[0.6, 1.0, 0.0]])
+    inward = np.array([[-0.3, 0.0, 0.0]])
+    assert np.array_equal(_links_no_longer(hip, bent, foot, inward, 1.0, 1.0), inward)
+    # The same move outward lengthens both past their longest (the bent lengths, sqrt(1.36)): cut to them.
+    out = bent + _links_no_longer(hip, bent, foot, -inward, 1.0, 1.0)
+    assert np.linalg.norm(out - hip) == pytest.approx(np.sqrt(1.36), abs=1e-5)
+    assert np.linalg.norm(out - foot) == pytest.approx(np.sqrt(1.36), abs=1e-5)
 
 
 def test_the_body_moves_off_a_knelt_on_shin_at_most_back_to_the_capture():

@@ -76,13 +76,16 @@ def test_a_first_frame_the_root_teleports_from_is_a_rest_frame_whatever_its_pose
     # heights to where the walk starts. One frame, not the walk's first steps.
     motion = load_bvh(shared("wide/cmu_07_04_slow_walk_iclone.bvh"))
     assert detect_rest_frames(motion) == 1
-    # The same teleport put on a clip that starts well: the sample jump's frame 0 moved 0.3 heights.
+    # The same teleport put on a clip that starts well: the sample jump's frame 0 moved 0.4 heights
+    # (its header says 30 fps: the bar is 10 heights a second, 0.33 a frame).
     jump = load_bvh(ROOT_SAMPLE / "cmu_16_01_jump_amc2bvh.bvh")
     assert detect_rest_frames(jump) == 0
     local = jump.local_positions.copy()
-    local[0, 0, 0] -= 0.3 * jump.skeleton.height()
+    local[0, 0, 0] -= 0.4 * jump.skeleton.height()
     assert detect_rest_frames(replace(jump, local_positions=local)) == 1
-    local[0, 0, 0] += 0.2 * jump.skeleton.height()  # 0.1 heights: a fast step, not a teleport
+    local[0, 0, 0] += 0.1 * jump.skeleton.height()  # 0.3 heights at 30 fps (9 a second): fast, not a teleport
+    assert detect_rest_frames(replace(jump, local_positions=local)) == 0
+    local[0, 0, 0] += 0.2 * jump.skeleton.height()  # 0.1 heights: a fast step
     assert detect_rest_frames(replace(jump, local_positions=local)) == 0
     # A fast run's real steps (0.056 heights at most over the shared clips) are not a teleport.
     assert detect_rest_frames(load_bvh(shared("cmu_09_01_run_daz.bvh"))) == 4

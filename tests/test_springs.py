@@ -167,7 +167,8 @@ def test_the_lag_stretches_a_link_softly_to_its_most_and_the_chain_below_follows
 
 def test_no_link_of_a_looney_dance_stretches_past_the_presets_range():
     # The iClone pirouette at looney: a hand lagging behind a fast elbow stretched the forearm 2.42x
-    # (the preset's follow-through is held to 1.75x, the correction's free stretch to 1.5x).
+    # (the preset's follow-through is held to 1.75x, the correction's free stretch to 1.5x; the stages
+    # after the springs do not stretch this clip further, though on others they may a little).
     motion, _ = read_bvh(shared("wide/cmu_05_11_dance_sideways_pirouette_iclone.bvh"))
     config = load_preset("looney")
     result = run(motion, config)

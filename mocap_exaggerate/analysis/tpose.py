@@ -15,16 +15,19 @@ import numpy as np
 from ..core.motion import Motion
 from ..core.rotations import quat_angle
 
-__all__ = ["detect_rest_frames", "REST_POSE_MAX_ANGLE", "JUMP_FACTOR", "TELEPORT"]
+__all__ = ["detect_rest_frames", "REST_POSE_MAX_ANGLE", "JUMP_FACTOR", "TELEPORT", "TELEPORT_SPEED"]
 
 #: Frame 0 counts as a rest pose only if no non-root joint is turned more than this (degrees).
 REST_POSE_MAX_ANGLE = 30.0
 #: A leading frame is synthetic when the pose jumps this many times the clip's median per-frame change.
 JUMP_FACTOR = 8.0
 #: A leading frame is synthetic, whatever its pose, when the root leaves it by more than this many
-#: skeleton heights in one frame (and `JUMP_FACTOR` times its median step): no body runs that fast
-#: (10 m/s at 24 fps is 0.24 heights a frame). The 33 shared clips' largest real step is 0.056.
+#: skeleton heights in one frame, and `TELEPORT_SPEED` (and `JUMP_FACTOR` times its median step): no
+#: body runs that fast. The 33 shared clips' largest real first step is 0.056 heights.
 TELEPORT = 0.25
+#: ... and by more than this many skeleton heights a second (18 m/s on a 1.8 m body: past a sprint),
+#: so a keyframed clip at a few frames a second is not cut at a fast first step.
+TELEPORT_SPEED = 10.0
 
 
 def detect_rest_frames(motion: Motion, world_positions: np.ndarray | None = None) -> int:
@@ -35,8 +38,9 @@ def detect_rest_frames(motion: Motion, world_positions: np.ndarray | None = None
         orientation and the root-relative pose then jumps by more than
         `JUMP_FACTOR` times the clip's median per-frame change (and by over
         1 % of the skeleton height), or
-    (b) the root teleports from it: more than `TELEPORT` heights (and
-        `JUMP_FACTOR` times its median step) in one frame, whatever the pose.
+    (b) the root teleports from it: more than `TELEPORT` heights in one frame
+        (and `TELEPORT_SPEED` heights a second, and `JUMP_FACTOR` times its
+        median step), whatever the pose.
     Frames after it count too while the jump into the next frame stays that
     large. ``world_positions`` (F, J, 3) saves recomputing forward kinematics.
     """
@@ -45,7 +49,8 @@ def detect_rest_frames(motion: Motion, world_positions: np.ndarray | None = None
     world = motion.world_positions() if world_positions is None else world_positions
     height = motion.skeleton.height()
     step = np.linalg.norm(world[1:, 0] - world[:-1, 0], axis=-1)
-    teleport = step > max(JUMP_FACTOR * float(np.median(step)), TELEPORT * height)
+    teleport = step > max(JUMP_FACTOR * float(np.median(step)), TELEPORT * height,
+                          TELEPORT_SPEED * height * motion.frame_time)
     if not teleport[0]:
         rot = motion.local_rotations
         identity = np.zeros(4)

@@ -60,8 +60,9 @@ class Body(NamedTuple):
     sides : `captured_sides`, the way from each capsule's axis to each captured part
     margin : how far past the surface a part is pushed (5 % of the thinnest capsule)
     limbs : the limbs with parts, in a fixed order (each one's push moves the next one's body)
-    root : (F, 3) the captured root: a body moved off a knelt-on shin goes at most back to it, and
-        ``slack`` past it (10 % of the longer captured leg, about 5 % of the height; `_back_to`)
+    hips, root : the legs' base joints and where the capture has their middle (F, 3): a body moved
+        off a knelt-on shin goes at most back to it, and ``slack`` past it (10 % of the longer captured
+        leg, about 5 % of the height; `_back_to`); no move without legs
     """
 
     capsules: list
@@ -70,6 +71,7 @@ class Body(NamedTuple):
     sides: dict
     margin: float
     limbs: tuple[str, ...]
+    hips: tuple[int, ...]
     root: np.ndarray
     slack: float
 
@@ -84,9 +86,11 @@ def prepare_body(limbs: dict, captured_pos: np.ndarray) -> Body | None:
     legs = [limbs[name].joints for name in ("left_leg", "right_leg") if name in limbs]
     leg = max((float(np.linalg.norm(np.diff(captured_pos[0, list(joints)], axis=0), axis=-1).sum()) for joints in legs),
               default=0.0)
+    hips = tuple(int(joints[0]) for joints in legs)
+    root = captured_pos[:, list(hips)].mean(axis=1) if hips else captured_pos[:, 0]
     return Body(capsules, parts, depth, captured_sides(captured_pos, capsules, parts),
                 0.05 * min(capsule.radius for capsule in capsules), tuple(dict.fromkeys(p.limb for p in parts)),
-                captured_pos[:, 0], 0.1 * leg)
+                hips, root, 0.1 * leg)
 
 
 def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Body, ramp: float,
@@ -163,8 +167,9 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Bod
                 move = eased_push(bend * held[:, None], 2 * span)
                 move_middle(out, chain_of(tuple(limb.joints)), original[limb.joints[1]],
                             _links_no_longer(base, middle, end, move, *longest_links[limb_name][:2]))
-            if np.any(lift * held[:, None]):
-                shift = _back_to(out[:, original[0]], body.root, eased_push(lift * held[:, None], 2 * span), body.slack)
+            if np.any(lift * held[:, None]) and body.hips:
+                shift = _back_to(out[:, original[list(body.hips)]].mean(axis=1), body.root,
+                                 eased_push(lift * held[:, None], 2 * span), body.slack)
                 if np.any(shift):
                     _move_body(out, original, limbs, effectors, pins, shift, move_end)
             moved = True

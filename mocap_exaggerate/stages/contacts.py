@@ -45,7 +45,7 @@ from ..core.errors import ConfigError, check_choice, check_flag, check_number
 from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
-from ..core.timing import check_duration, gaussian_average, parse_duration, parse_frame, smootherstep, soft_limit, spread_max
+from ..core.timing import check_duration, gaussian_average, parse_duration, parse_frame, smootherstep, spread_max
 from .collide import keep_out, prepare_body, unbend_hinges
 from .state import Pins
 from .subjoints import even_out
@@ -97,9 +97,6 @@ class ContactConfig:
         (a contact holds while under 1.6 times this and 1.5 times ``height``)
     min_duration : shorter contacts are ignored (seconds, ``"80ms"`` or ``"10f"``)
     blend : time to ease into and out of each contact (and a floor press)
-    max_reach : a planted end pulls its limb to at most this factor of the limb's captured
-        length (or as far as the exaggeration already stretched it); where the body is
-        thrown farther, the end follows instead of tearing the limb (`within_reach`)
     floor : keep every joint above the captured floor
     """
 
@@ -115,7 +112,6 @@ class ContactConfig:
     speed: float = 0.3
     min_duration: str | float = "0.08s"
     blend: str | float = "0.15s"
-    max_reach: float = 2.0
     floor: bool = setting(True, flag=Flag(
         "--floor/--no-floor", "Keep every joint above the captured floor (with --contacts auto)."))
     collide: bool = setting(True, flag=Flag(
@@ -132,7 +128,6 @@ class ContactConfig:
         check_choice("contacts.anchor", self.anchor, _ANCHORS)
         check_number("contacts.height", self.height, 0, 1)
         check_number("contacts.speed", self.speed, 0, 100)
-        check_number("contacts.max_reach", self.max_reach, 1, 10)
         for name in ("min_duration", "blend"):
             check_duration(getattr(self, name), f"contacts.{name}")
 
@@ -409,29 +404,6 @@ def limb_contacts(skeleton: Skeleton, captured_pos: np.ndarray, frame_time: floa
     effectors = find_effectors(skeleton, limbs, minor_branches(skeleton))
     _, touching = find_contacts(skeleton, captured_pos, frame_time, limbs, effectors, config)
     return {name: touching[limb.end] for name, limb in limbs.items() if limb.end in touching}
-
-
-#: Where `within_reach` starts to give: this share of the way from the limb's longer reach (as exaggerated,
-#: or its captured length) to its most.
-REACH_KNEE = 0.5
-
-
-def within_reach(target: np.ndarray, base: np.ndarray, end: np.ndarray, length: float, most: float) -> np.ndarray:
-    """``target`` (F, 3) for a chain from ``base`` (F, 3), drawn in to at most ``most`` times the chain's
-    captured ``length`` from it, or to where its ``end`` (F, 3) already is where that is farther.
-
-    A boxer thrown onto the canvas at looney flies 3 leg lengths from where his feet were planted: held
-    there, the thighs stretched 2.96x and tore the skin. The reach eases in softly (`soft_limit`, from
-    `REACH_KNEE` of the way up), so the foot slides smoothly where the body outruns it.
-    """
-    reach = target - base
-    distance = np.linalg.norm(reach, axis=-1)
-    had = np.linalg.norm(end - base, axis=-1)
-    top = np.maximum(had, most * length)
-    knee = np.minimum(np.maximum(had, length + REACH_KNEE * (top - length)), top)
-    drawn = soft_limit(distance, knee, top)
-    scale = np.divide(drawn, distance, out=np.ones_like(distance), where=distance > 0)
-    return base + reach * scale[:, None]
 
 
 def contact_weights(runs: np.ndarray, frames: int, ramp) -> np.ndarray:
@@ -714,7 +686,6 @@ def constrain(
     groups: tuple[tuple[int, ...], ...] = (),
     max_speed: float = 0.0,
     riders: dict[int, list[int]] | None = None,
-    moved_body: tuple[tuple[int, int], ...] = (),
 ) -> ConstraintResult:
     """Restore contacts, targets, stretch keys and the floor on rubber positions.
 
@@ -727,8 +698,6 @@ def constrain(
     max_speed : the extrapolation's speed limit (times each joint's captured top speed): a foot
         easing onto its contact and the joints ``riders`` (joint -> rigid riders) keep to it too
         (`ease_lengths`); the ease adds at most the foot's captured top speed in any case (`run_ramps`)
-    moved_body : (first, last) frames where a stretch moved the body for a planted leg: there a planted end
-        is not drawn in to its limb's reach (`within_reach`, ``config.max_reach``), as it is elsewhere
     """
     out = np.array(sub_pos, dtype=np.float64)
     frames = out.shape[0]
@@ -756,8 +725,6 @@ def constrain(
     pins: dict[int, np.ndarray] = {}
     found: dict[str, list[list[int]]] = {}
     ground = None
-    moved = np.asarray(moved_body, dtype=np.int64).reshape(-1, 2)
-    free = contact_weights(moved, frames, ramp) if len(moved) else np.zeros(frames)
     if config.enabled:
         ground, touching = find_contacts(skeleton, captured_pos, frame_time, limbs, effectors, config)
         for joint, runs in touching.items():
@@ -768,11 +735,6 @@ def constrain(
                 target = captured_pos[:, joint]
             else:
                 target = anchored_targets(captured_pos[:, joint], out[:, original[joint]], runs, ground)
-            # Drawn in where the body flies farther than the limb reaches; not where a stretch moved the body
-            # on purpose (the other planted leg reaches the body where the stretch put it).
-            chain = sub_chain(hierarchy, effectors[joint].chain)
-            drawn = within_reach(target, out[:, chain[0]], out[:, chain[-1]], rest[chain[1:]].sum(), config.max_reach)
-            target = drawn + free[:, None] * (target - drawn)
             # A foot landing far from where the exaggeration put it eases in longer, not faster.
             gap = np.linalg.norm(target - out[:, original[joint]], axis=-1)
             speed = float(np.linalg.norm(np.diff(captured_pos[:, joint], axis=0), axis=-1).max(initial=0.0))
@@ -971,9 +933,6 @@ def constraints_stage(state: State, plan: ConstraintPlan) -> State:
         motion.frame_time, config=plan.contacts, targets=tuple(targets), keys=state.stretch_keys or (), groups=groups,
         max_speed=state.speed_limit,
         riders=rider_joints(skeleton),
-        moved_body=tuple((a - first, b - first) for a, b in
-                         (event.span or event.frames for event in (state.stretch.events if state.stretch else ())
-                          if event.moved_body)),
     )
     out = positions.copy()
     # The chains bent to meet their targets, with even sub-links again (each keeping its direction): every

@@ -351,9 +351,12 @@ def springs_stage(state: State, config: SpringConfig) -> State:
     return replace(state, sub_positions=out, substeps=substeps, notes=notes)
 
 
-#: Where `limit_stretch` starts to give: this share of the way from a sub-link's longer length (before
-#: the springs, or at rest) to its most.
+#: Where `limit_stretch` starts to give: this share of the way from a sub-link's rest length to its most
+#: (or at its length before the springs, if that is more).
 LIMIT_KNEE = 0.5
+#: The least room above that start, as a share of the way from rest to the most: a link a stretch had
+#: already made nearly as long as the most still eases in rather than being clipped flat.
+LIMIT_ROOM = 0.2
 
 
 def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray, rest: np.ndarray,
@@ -363,9 +366,12 @@ def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray
 
     A link is shortened along its own direction, so its bend and turn stay as they were, and a
     shortened link carries its subtree with it (each joint is its parent plus its own, possibly
-    shortened, link vector: one pass over the joints, parents first). The limit is soft: a link
-    keeps its length up to `LIMIT_KNEE` of the way from its longer of before and rest to its most,
-    and eases into the most above that (a tanh, so the length and its speed stay continuous).
+    shortened, link vector: one pass over the joints, parents first; a `Skeleton` keeps parents
+    before children). The limit is soft: a link keeps its length up to ``rest + LIMIT_KNEE (most
+    - 1) rest``, or up to its length before, whichever is more, and eases above that (a tanh, so the
+    length and its speed stay continuous) into ``most * rest``, or into ``LIMIT_ROOM (most - 1)
+    rest`` past where it starts to give where that is more (a link a strike had already made 2x
+    long may swing a little past it rather than be clipped flat).
     """
     if not len(links):
         return positions
@@ -376,8 +382,9 @@ def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray
     limited = limited[1:]
     had = np.linalg.norm(before[:, 1:][:, limited] - before[:, parents[1:][limited]], axis=-1)
     rest = rest[1:][limited]
-    top = np.maximum(had, most * rest)
-    knee = np.minimum(np.maximum(had, rest + LIMIT_KNEE * (top - rest)), top)
+    way = (most - 1.0) * rest
+    knee = np.maximum(had, rest + LIMIT_KNEE * way)
+    top = np.maximum(most * rest, knee + LIMIT_ROOM * way)
     new_length = soft_limit(length[:, limited], knee, top)
     scale = np.ones_like(length)
     scale[:, limited] = np.divide(new_length, length[:, limited], out=np.ones_like(new_length),

@@ -307,7 +307,6 @@ class StretchEvent:
     captured : for a declared stretch, the S asked: the limb's length at the key frame over its captured
         length there (``scale`` is the factor that took on the exaggerated limb); None for found ones
     moved_body : the limb's end was planted somewhere in the event: the body moved instead of it
-    span : the inclusive frames it changes, its ease and release included (not in the manifest)
     """
 
     limb: str
@@ -320,7 +319,6 @@ class StretchEvent:
     reach: float | None = None
     captured: float | None = None
     moved_body: bool = False
-    span: tuple[int, int] | None = None
 
     def to_dict(self) -> dict:
         """The event as the manifest lists it."""
@@ -456,7 +454,7 @@ def apply_stretches(
         _follow(world_pos, skeleton, limb, target, span)
         events.append(StretchEvent(limb=spec.limb, frames=(first, last), scale=float(spec.scale), axes=spec.axes,
                                    pivot=spec.pivot, effective_scale=round(float(effective), 6), axes_relaxed=not exact,
-                                   moved_body=moved_body, span=(lo, hi)))
+                                   moved_body=moved_body))
         trails.append({
             "limb": spec.limb, "joint": skeleton.names[end], "frames": list(range(lo, hi + 1)),
             "original": before[span, end].round(6).tolist(), "exaggerated": world_pos[span, end].round(6).tolist(),
