@@ -107,12 +107,14 @@ def _weights_by_name(skin: Skin, vertex: int) -> dict[str, float]:
     return {skin.joint_names[j]: w for j, w in zip(skin.joints[vertex], skin.weights[vertex]) if w > 0}
 
 
-def test_a_branch_joints_weight_stays_on_the_link_a_vertex_lies_by():
+def test_a_branch_joints_weight_stays_on_the_link_a_vertex_lies_by_on_a_skin_made_per_link():
     skeleton = _body()
     rubber = link_starts(build_hierarchy(skeleton, SubjointConfig(per_link=4)))
-    # Three vertices bound to the hips: by the left hip link, by the right one, up the spine.
+    # Three vertices bound to the hips: by the left hip link, by the right one, up the spine, on a
+    # skin made link by link (the default body's tubes): each follows its own link's sub-links.
     vertices = np.array([[0.25, 0.95, 0.1], [-0.25, 0.95, 0.1], [0.0, 1.5, 0.1]])
-    skin = Skin(vertices, np.array([[0, 1, 2]]), ("Hips",), np.zeros((3, 1), np.int64), np.ones((3, 1)))
+    skin = Skin(vertices, np.array([[0, 1, 2]]), ("Hips",), np.zeros((3, 1), np.int64), np.ones((3, 1)),
+                per_link=True)
     out = reweight(skin, skeleton, rubber)
     left, right, spine = (_weights_by_name(out, v) for v in range(3))
     assert left and all(n.startswith("LeftUpLeg_s") for n in left), left
@@ -122,8 +124,27 @@ def test_a_branch_joints_weight_stays_on_the_link_a_vertex_lies_by():
         assert abs(sum(weights.values()) - 1.0) < 1e-12
 
 
+def test_a_painted_characters_branch_joint_keeps_its_own_frame():
+    # The same vertices on a painted character's skin: a belly, a buttock or the top of a shoulder
+    # painted to the hips or the chest was shaped for that one rigid frame; handed to the sub-links
+    # of the links it wraps it rolled and stretched with them (the MakeHuman body tore more on the
+    # rubber skeleton than on straight links, with no exaggeration at all). It stays on the joint.
+    skeleton = _body()
+    rubber = link_starts(build_hierarchy(skeleton, SubjointConfig(per_link=4)))
+    vertices = np.array([[0.25, 0.95, 0.1], [-0.25, 0.95, 0.1], [0.0, 1.5, 0.1]])
+    skin = Skin(vertices, np.array([[0, 1, 2]]), ("Hips", "Spine"), np.array([[0, 1]] * 3),
+                np.array([[1.0, 0.0], [1.0, 0.0], [0.5, 0.5]]))
+    out = reweight(skin, skeleton, rubber)
+    assert _weights_by_name(out, 0) == pytest.approx({"Hips": 1.0})
+    assert _weights_by_name(out, 1) == pytest.approx({"Hips": 1.0})
+    # The spine's own half still follows its link's sub-links (a chain joint, not a branch).
+    spine = _weights_by_name(out, 2)
+    assert spine["Hips"] == pytest.approx(0.5)
+    assert sum(w for n, w in spine.items() if n.startswith(("Head_s", "Spine_s"))) == pytest.approx(0.5)
+
+
 def test_coincident_sibling_links_are_told_apart_by_the_links_after_them():
-    # An Assimp or mocapbank chest starts the neck and both collars at one point and ends them at
+    # On a skin made per link (the default body): an Assimp or mocapbank chest starts the neck and both collars at one point and ends them at
     # another: every vertex is as near to one as to the others. A vertex on the neck goes to the
     # neck (it continues to the head), one over a shoulder to that collar (it continues to the arm);
     # an even three-way split tore the neck 48x on a looney crouch.
@@ -138,7 +159,8 @@ def test_coincident_sibling_links_are_told_apart_by_the_links_after_them():
     rubber = link_starts(build_hierarchy(skeleton, SubjointConfig(per_link=4)))
     chest = skeleton.rest_positions()[0]
     vertices = chest + np.array([[0.0, 0.1, 0.05], [0.15, 0.17, 0.05], [-0.15, 0.17, 0.05]])
-    skin = Skin(vertices, np.array([[0, 1, 2]]), ("Chest",), np.zeros((3, 1), np.int64), np.ones((3, 1)))
+    skin = Skin(vertices, np.array([[0, 1, 2]]), ("Chest",), np.zeros((3, 1), np.int64), np.ones((3, 1)),
+                per_link=True)
     out = reweight(skin, skeleton, rubber)
     neck, left, right = (_weights_by_name(out, v) for v in range(3))
     assert neck and sum(w for n, w in neck.items() if n.startswith("Neck_s")) > 0.99, neck

@@ -166,7 +166,7 @@ def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: 
     if skin.joints.shape[1] > influences:
         rows = np.repeat(np.arange(skin.num_vertices), skin.joints.shape[1])
         joints, weights = top_influences(rows, skin.joints.ravel(), skin.weights.ravel(), skin.num_vertices, influences)
-        return Skin(skin.vertices, skin.faces, skin.joint_names, joints, weights, skin.bind)
+        return Skin(skin.vertices, skin.faces, skin.joint_names, joints, weights, skin.bind, per_link=skin.per_link)
     return skin
 
 

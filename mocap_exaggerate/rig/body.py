@@ -163,7 +163,7 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     weights[:, 0] = 1.0 - weights[:, 1]
     joints[:, 0] = owners[:, 0]
     joints[:, 1] = np.where(weights[:, 1] > 0, owners[:, 1], 0)
-    return Skin(vertices, faces.astype(np.int64), skeleton.names, joints, weights)
+    return Skin(vertices, faces.astype(np.int64), skeleton.names, joints, weights, per_link=True)
 
 
 def _chains(mover: np.ndarray, start: np.ndarray, end: np.ndarray, child: np.ndarray, short: float) -> list[list[int]]:
