@@ -144,10 +144,11 @@ def test_a_painted_characters_branch_joint_keeps_its_own_frame():
 
 
 def test_coincident_sibling_links_are_told_apart_by_the_links_after_them():
-    # On a skin made per link (the default body): an Assimp or mocapbank chest starts the neck and both collars at one point and ends them at
-    # another: every vertex is as near to one as to the others. A vertex on the neck goes to the
-    # neck (it continues to the head), one over a shoulder to that collar (it continues to the arm);
-    # an even three-way split tore the neck 48x on a looney crouch.
+    # On a skin made per link (the default body): an Assimp or mocapbank chest starts the neck and
+    # both collars at one point and ends them at another, so every vertex is as near to one as to
+    # the others. A vertex on the neck goes to the neck (it continues to the head), one over a
+    # shoulder to that collar (it continues to the arm); an even three-way split tore the neck 48x
+    # on a looney crouch.
     names = ("Chest", "Neck", "Head", "LeftCollar", "LeftShoulder", "RightCollar", "RightShoulder")
     parents = np.array([-1, 0, 1, 0, 3, 0, 5])
     offsets = np.array([[0, 1, 0], [0, 0.2, 0], [0, 0.2, 0], [0, 0.2, 0], [0.3, 0, 0], [0, 0.2, 0],
