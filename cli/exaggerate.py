@@ -79,6 +79,8 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
     if record.manifest is not None and not quiet():
         written = record.outputs
         suffixes = {"glb": ".glb", "weights": ".weights.npz", "pipeline": ".pipeline.toml"}
+        if "usd" in written:
+            suffixes["usd"] = Path(written["usd"]).suffix
         extras = ", ".join(suffixes[k] for k in written if k in suffixes)
         click.echo(
             f"wrote {written['bvh']}{', ' + extras if extras else ''} and {written['manifest'].name}: "

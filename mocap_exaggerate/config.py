@@ -130,6 +130,8 @@ class OutputConfig:
 #: ``glb.units``: ``auto`` or metres per unit by name (the same names as `mocap_exaggerate.io.gltf.UNITS`,
 #: which this light module does not import).
 GLB_UNITS = ("auto", "m", "dm", "cm", "mm", "in", "ft", "cmu")
+#: The UsdSkel files ``glb.usd`` may ask for, by suffix (`mocap_exaggerate.io.usd.USD_FORMATS`).
+USD_FORMATS = ("usd", "usda", "usdc")
 _INFLUENCES = (4, 8)
 #: The ``[glb]`` keys that name a file, each with the key of its SHA-256.
 GLB_FILES = (("skin", "skin_sha256"), ("joint_map", "joint_map_sha256"))
@@ -144,6 +146,9 @@ class GlbConfig:
         50 units tall, metres under 3, else scaled to a 1.7 m figure), ``m``, ``dm``, ``cm``, ``mm``,
         ``in``, ``ft`` or ``cmu`` (CMU's 1/0.45 inch)
     influences : joints per vertex, 4 (JOINTS_0) or 8 (a second JOINTS_1/WEIGHTS_1 set)
+    usd : also write the same character as a UsdSkel, ``<name>.usd``, ``.usdc`` (binary) or
+        ``.usda`` (text): the word is the suffix; empty for none (`mocap_exaggerate.io.usd`;
+        needs the ``usd`` extra, Pixar's usd-core)
     skin : the character file (a skinned ``.glb``/``.gltf``, a MakeHuman ``.obj``, an ``.npz``);
         empty for the rubber body grown from the skeleton. A relative path is relative to the
         folder of the pipeline file that holds it (a run writes it so)
@@ -161,6 +166,10 @@ class GlbConfig:
     influences: int = setting(4, flag=Flag(
         "--influences", "Joints per vertex in the GLB: 4 (JOINTS_0) or 8 (a second JOINTS_1/WEIGHTS_1 set). "
         "[default: 4]", choices={str(n): n for n in _INFLUENCES}))
+    usd: str = setting("", flag=Flag(
+        "--usd", "Also write OUT/<name>.FORMAT: the same character as a skinned, animated UsdSkel, usd or usdc "
+        "(binary) or usda (text). Needs the usd extra: pip install 'mocap-exaggerate[usd]'.", metavar="FORMAT",
+        choices=USD_FORMATS))
     skin: str = setting("", flag=Flag(
         "--skin", "Your character: a skinned .glb/.gltf, a MakeHuman .obj (+ .mhw, .mhskel beside it) or an .npz "
         "bound to the clip's joints. Made for another rig, it is fitted to the clip (joints paired by role and "
@@ -174,6 +183,8 @@ class GlbConfig:
     def __post_init__(self) -> None:
         check_flag("glb.enabled", self.enabled)
         check_choice("glb.units", self.units, GLB_UNITS)
+        if not isinstance(self.usd, str) or self.usd not in ("", *USD_FORMATS):
+            raise ConfigError(f"glb.usd must be one of {', '.join(USD_FORMATS)} (or empty for none), got {self.usd!r:.40}")
         if isinstance(self.influences, bool) or not isinstance(self.influences, int) or self.influences not in _INFLUENCES:
             raise ConfigError(f"glb.influences must be 4 or 8, got {self.influences!r:.60}")
         for key, digest_key in GLB_FILES:

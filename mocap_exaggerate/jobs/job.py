@@ -53,7 +53,7 @@ class JobRecord:
     """What one `convert` call did.
 
     input : the input as named in messages
-    outputs : kind (``bvh``, ``glb``, ``weights``, ``pipeline``, ``trails``, ``manifest``) -> path written
+    outputs : kind (``bvh``, ``glb``, ``weights``, ``usd``, ``pipeline``, ``trails``, ``manifest``) -> path written
     frames, joints : of the output motion
     max_link_stretch : largest link length over its rest length, after the stretch pass
     seconds : wall time of the whole job
@@ -97,14 +97,19 @@ def check_name(name: str) -> str:
 
 
 def output_paths(folder: str | os.PathLike, name: str, *, glb: bool = True,
-                 trails: str | os.PathLike | None = None) -> dict[str, Path]:
-    """The files a job writes, by kind, in the order they are written (manifest last)."""
+                 trails: str | os.PathLike | None = None, usd: str = "") -> dict[str, Path]:
+    """The files a job writes, by kind, in the order they are written (manifest last).
+
+    usd : with ``glb``, the suffix of the UsdSkel file written beside the GLB (empty: none)
+    """
     folder = Path(folder)
     name = check_name(name)
     paths = {"bvh": folder / f"{name}.bvh"}
     if glb:
         paths["glb"] = folder / f"{name}.glb"
         paths["weights"] = folder / f"{name}.weights.npz"
+        if usd:
+            paths["usd"] = folder / f"{name}.{usd}"
     paths["pipeline"] = folder / f"{name}.pipeline.toml"
     if trails is not None:
         paths["trails"] = Path(trails)
@@ -149,6 +154,8 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
     fields = {"version": __version__, "preset": preset, "config": pipeline, "glb": bool(glb),
               "units": units, "influences": int(influences), "skin": skin_content(skin),
               "path_file": digest_of_file(path_file) if path_file is not None else None}
+    if glb and config.glb.usd:  # only when asked for: digests of runs without one stay what they were
+        fields["usd"] = config.glb.usd
     if joint_map is not None:  # only when given: digests of runs without one stay what they were
         from ..rig.binding import read_joint_map
 
@@ -241,6 +248,13 @@ def convert(
         config = load_preset(preset or DEFAULT_PRESET)
     to_stream = hasattr(output, "write")
     glb = (config.glb.enabled if glb is None else glb) and not to_stream
+    usd = config.glb.usd if glb else ""
+    if config.glb.usd and not glb and not to_stream:
+        raise ConfigError("glb.usd: the USD file is the GLB's character; it is written with the GLB (drop --no-glb)")
+    if usd:
+        from ..io.usd import require_usd
+
+        require_usd()  # one line naming the extra, before anything is read or written
     data, label = read_source(source, label)
     stem = check_name(name if name is not None else _default_name(source))
     if to_stream:
@@ -249,10 +263,14 @@ def convert(
         folder = Path(output)
         if folder.exists() and not folder.is_dir():
             raise ConfigError(f"{folder}: exists and is not a folder")
-        targets = output_paths(folder, stem, glb=glb, trails=trails)
-    # Outputs of an earlier run with the GLB that this run will not write: they would sit beside
-    # a manifest that does not list them. Refused like any output, removed with overwrite.
-    retired = [] if glb or to_stream else [Path(output) / f"{stem}.glb", Path(output) / f"{stem}.weights.npz"]
+        targets = output_paths(folder, stem, glb=glb, trails=trails, usd=usd)
+    # Outputs of an earlier run with the GLB (or a USD file) that this run will not write: they would
+    # sit beside a manifest that does not list them. Refused like any output, removed with overwrite.
+    from ..config import USD_FORMATS
+
+    retired = [] if to_stream else [Path(output) / f"{stem}.{suffix}" for suffix in USD_FORMATS if suffix != usd]
+    if not glb and not to_stream:
+        retired += [Path(output) / f"{stem}.glb", Path(output) / f"{stem}.weights.npz"]
     retired = [path for path in retired if path.exists()]
     # Every option first (a bad unit, skin or path file is the first thing said), then the outputs.
     from ..io.trails import read_trails
@@ -298,7 +316,8 @@ def convert(
         if glb:
             from .outputs import glb_files
 
-            building = pool.submit(_timed, glb_files, motion, result, skin, character.units, character.influences)
+            building = pool.submit(_timed, glb_files, motion, result, skin, character.units, character.influences,
+                                   None, usd)
         else:
             building = None
         tick = time.perf_counter()
@@ -311,10 +330,13 @@ def convert(
             outputs["bvh"] = written.add(targets["bvh"], iter_bvh(result.motion, positions=config.output.bvh_positions))
         timings["write"] = time.perf_counter() - tick
         if building is not None:
-            (glb_pieces, weights, units_used), timings["glb"] = building.result()
-            outputs["glb"] = written.add(targets["glb"], glb_pieces)
-            outputs["weights"] = written.add(targets["weights"], weights)
-            del glb_pieces, weights
+            files, timings["glb"] = building.result()
+            units_used = files.units
+            outputs["glb"] = written.add(targets["glb"], files.glb)
+            outputs["weights"] = written.add(targets["weights"], files.weights)
+            if files.usd is not None:
+                outputs["usd"] = written.add(targets["usd"], files.usd)
+            del files
         if not to_stream:
             outputs["pipeline"] = written.add(targets["pipeline"], recorded.to_toml(preset=preset).encode("utf-8"))
         if trails is not None:
@@ -425,7 +447,8 @@ def recorded_config(config: PipelineConfig, folder: str | os.PathLike, *, glb: b
     folder = Path(folder)
     skin_path, skin_sha = _named(skin, folder)
     map_path, map_sha = _named(joint_map, folder) if skin_path else ("", "")
-    return replace(config, glb=GlbConfig(enabled=bool(glb), units=units, influences=int(influences), skin=skin_path,
+    return replace(config, glb=GlbConfig(enabled=bool(glb), units=units, influences=int(influences),
+                                         usd=config.glb.usd if glb else "", skin=skin_path,
                                          skin_sha256=skin_sha, joint_map=map_path, joint_map_sha256=map_sha))
 
 

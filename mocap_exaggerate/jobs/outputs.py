@@ -7,7 +7,7 @@ where they go and writes them.
 from __future__ import annotations
 
 from dataclasses import asdict
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -19,7 +19,7 @@ from ..io.bvh import written_positions
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin, top_influences
 
-__all__ = ["manifest", "output_thickness", "base_skin", "output_skin", "make_glb", "glb_files"]
+__all__ = ["manifest", "output_thickness", "base_skin", "output_skin", "make_glb", "glb_files", "CharacterFiles"]
 
 
 def manifest(
@@ -173,18 +173,30 @@ def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: 
 def make_glb(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
              influences: int = 4, joint_map: dict[str, str] | None = None) -> tuple[bytes, bytes, str]:
     """The skinned GLB of a run, its skin as ``.npz`` bytes, and how the units were decided."""
-    pieces, weights, how = glb_files(motion, result, skin, units, influences, joint_map)
-    return b"".join(pieces), weights, how
+    files = glb_files(motion, result, skin, units, influences, joint_map)
+    return b"".join(files.glb), files.weights, files.units
+
+
+class CharacterFiles(NamedTuple):
+    """What `glb_files` makes: the GLB as pieces, the re-weighted skin as ``.npz`` bytes, how the
+    units were decided, and the UsdSkel file's bytes (None unless asked for)."""
+
+    glb: list[bytes]
+    weights: bytes
+    units: str
+    usd: bytes | None = None
 
 
 def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto",
-              influences: int = 4, joint_map: dict[str, str] | None = None) -> tuple[list[bytes], bytes, str]:
+              influences: int = 4, joint_map: dict[str, str] | None = None, usd: str = "") -> CharacterFiles:
     """As `make_glb`, with the GLB as a list of pieces (no copy of a long clip's animation into one blob).
 
     motion : the captured clip the run started from
     skin : a character (bound to the clip here when it is not yet, `mocap_exaggerate.rig.binding`;
         ``joint_map`` for the pairs the binding misses), or None for the default body grown
         from the skeleton
+    usd : also the same character as a UsdSkel file of this suffix (``usd``, ``usdc``, ``usda``;
+        `mocap_exaggerate.io.usd.format_usd`), posed exactly as the GLB
     Joints are scaled by `output_thickness` (kept volume) unless the run's ``output.preserve_volume`` is off.
     """
     from ..io.gltf import glb_pieces, unit_scale
@@ -196,7 +208,13 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
 
     step = max(motion.num_frames // 64, 1)  # a sample of the clip tells which way is up
     up = standing_up(motion.skeleton, motion.slice(slice(None, None, step)).world_positions())
-    glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=output_thickness(result), up=up)
+    thickness = output_thickness(result)
+    glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=thickness, up=up)
     weights = npz_bytes(joint_names=np.array(bound.joint_names), joints=bound.joints, weights=bound.weights,
                         vertices=bound.vertices, faces=bound.faces)
-    return glb, weights, how
+    scene = None
+    if usd:
+        from ..io.usd import format_usd
+
+        scene = format_usd(result.motion, bound, suffix=usd, meters_per_unit=scale, thickness=thickness, up=up)
+    return CharacterFiles(glb, weights, how, scene)
