@@ -4,6 +4,8 @@ Prints, best and median of several runs each:
 - ``mocap-exaggerate exaggerate`` with every default output (BVH, GLB, weights,
   pipeline, manifest) on a 10,000-frame 31-joint CMU clip (the shared
   cmu_01_01 clip's motion lines tiled), with its peak RSS;
+- the same with ``--usd usdc`` and ``--usd usda`` (where usd-core is installed), and the sizes of
+  the BVH, GLB and USD files;
 - ``mocap-exaggerate --help`` and ``info`` on a short clip (start-up cost);
 - what the command imports, and why the library evaluates its own Bézier
   curves instead of scipy's CubicHermiteSpline.
@@ -111,6 +113,19 @@ def main() -> None:
         bvh_only = [run_process(CLI + ["-q", "exaggerate", str(long_clip), "-o", str(out), "--overwrite",
                                        "--no-glb"]) for _ in range(args.repeat)]
         report(f"exaggerate, {args.frames} frames, --no-glb", bvh_only)
+        sizes = {kind: (out / f"{long_clip.stem}.{kind}").stat().st_size for kind in ("bvh",)}
+        try:
+            import pxr  # noqa: F401  the usd extra
+        except ImportError:
+            print("USD: usd-core is not installed (pip install 'mocap-exaggerate[usd]'); not measured")
+        else:
+            for suffix in ("usdc", "usda"):
+                runs = [run_process(CLI + ["-q", "exaggerate", str(long_clip), "-o", str(out), "--overwrite",
+                                           "--usd", suffix]) for _ in range(args.repeat)]
+                report(f"exaggerate, {args.frames} frames, all + --usd {suffix}", runs)
+                sizes[suffix] = (out / f"{long_clip.stem}.{suffix}").stat().st_size
+            sizes["glb"] = (out / f"{long_clip.stem}.glb").stat().st_size
+        print("file sizes: " + ", ".join(f".{kind} {size / 1e6:.1f} MB" for kind, size in sizes.items()))
     report("--help", [run_process(CLI + ["--help"]) for _ in range(args.repeat)], 0.3)
     report(f"info {short.name}", [run_process(CLI + ["info", str(short)]) for _ in range(args.repeat)], 0.6)
     code = "import sys; import mocap_exaggerate_cli.main; print(sorted(m for m in ('scipy', 'trimesh', 'numba', " \
