@@ -21,22 +21,28 @@ from .options import FilePath
               show_default=True, help="Position channels replace the joint's OFFSET or add to it (iClone, MakeHuman).")
 @click.option("--up", type=click.Choice(["auto", "x", "y", "z"]), default="auto", show_default=True,
               help="The axis the body stands along.")
+@click.option("--clip", default="", metavar="NAME",
+              help="With a .glb/.gltf: the animation to describe (default: the first; all are listed).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
 @verbosity_options
 @fail_cleanly
 def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float | None, root_offset: str, up: str,
-         as_json: bool) -> None:
+         clip: str, as_json: bool) -> None:
     """Describe a clip: joints, channels, rotation orders, frames, fps, duration, height.
+
+    A skinned, animated .glb/.gltf is read as one of its animations (--clip), and all of them
+    are listed.
 
     \b
     Example:
       mocap-exaggerate info sample_data/cmu_09_01_run_daz.bvh --limbs --groups --contacts
+      mocap-exaggerate info ../shared/data/gltf/fox_khronos.glb --clip Walk --limbs
     """
     from mocap_exaggerate.jobs.job import describe
 
     label = "<stdin>" if str(input_path) == "-" else str(input_path)
     data = describe(input_path, fps=fps, limbs=limbs, groups=groups, contacts=contacts, label=label,
-                    root_offset=root_offset, up=up)
+                    root_offset=root_offset, up=up, clip=clip)
     orders = data["rotation_orders"]
     if as_json:
         click.echo(json.dumps(data, indent=2))
@@ -50,6 +56,10 @@ def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float
     click.echo(f"  rotation    {', '.join(f'{o} x{n}' for o, n in orders.items())}")
     click.echo(f"  frames      {data['frames']} at {data['fps']:g} fps ({data['duration_s']:.3f} s)")
     click.echo(f"  height      {data['height']:g} units along {data['up_axis']} (rest pose)")
+    for animation in data.get("animations", []):
+        taken = " (this one)" if animation["name"] == data["clip"] else ""
+        click.echo(f"  animation   {animation['name']}: {animation['duration_s']:g} s, {animation['keys']} keys, "
+                   f"{animation['channels']} channels{taken}")
     if data["rest_frames"]:
         click.echo(f"  rest pose   {data['rest_frames']} leading synthetic frame(s) (see --tpose)")
     for warning in data["warnings"]:

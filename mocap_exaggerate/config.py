@@ -72,6 +72,7 @@ class InputConfig:
     root_offset : position channels ``replace`` the OFFSET (most exporters), ``add``
         to it (Reallusion/iClone, MakeHuman), or ``auto``: told apart per clip.
     up : the axis the body stands along, ``x``, ``y``, ``z``, or ``auto`` (from the rest pose).
+    clip : with a glTF/GLB input, the animation to take, by name ("": the first; ``info`` lists them)
     """
 
     tpose: str = setting("auto", flag=Flag(
@@ -83,6 +84,9 @@ class InputConfig:
         "(Reallusion/iClone, MakeHuman); auto tells them apart. Default auto.", choices=ROOT_OFFSET_MODES))
     up: str = setting("auto", flag=Flag(
         "--up", "The axis the body stands along; auto: from the rest pose. Default auto.", choices=UP_AXES))
+    clip: str = setting("", flag=Flag(
+        "--clip", "With a .glb/.gltf input: the animation to take, by name (default: the first; info lists them).",
+        metavar="NAME"))
 
     def __post_init__(self) -> None:
         check_choice("input.tpose", self.tpose, _TPOSE_MODES)
@@ -90,6 +94,8 @@ class InputConfig:
             check_number("input.fps", self.fps, *FPS_RANGE)
         check_choice("input.root_offset", self.root_offset, ROOT_OFFSET_MODES)
         check_choice("input.up", self.up, UP_AXES)
+        if not isinstance(self.clip, str) or len(self.clip) > 1000 or "\x00" in self.clip:
+            raise ConfigError(f"input.clip must be an animation's name, got {self.clip!r:.60}")
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -20,7 +20,7 @@ from ..core.errors import InputError
 from ..core.rotations import quat_to_matrix
 from ..rig.skinning import Skin, top_influences
 
-__all__ = ["load_skin", "check_skin", "load_npz_skin", "load_gltf_skin", "load_makehuman_skin", "npz_bytes"]
+__all__ = ["load_skin", "check_skin", "load_npz_skin", "load_gltf_skin", "load_makehuman_skin", "npz_bytes", "open_gltf"]
 
 
 def load_npz_skin(path: str | os.PathLike) -> Skin:
@@ -111,6 +111,56 @@ def _read_obj_group(path: Path, group: str) -> tuple[np.ndarray, np.ndarray]:
     return np.array(vertices, dtype=np.float64), np.array(faces, dtype=np.int64)
 
 
+def open_gltf(path: str | os.PathLike):
+    """A glTF/GLB file and a function reading its accessor ``index`` as a ``(count, width)`` array.
+
+    Every number of an accessor is checked before a view is made over the buffer: a hostile
+    file must not make it read outside (a negative stride once crashed the process).
+    """
+    import pygltflib as gl
+
+    label = str(path)
+    try:
+        gltf = gl.GLTF2().load(str(path))
+    except Exception as error:  # pygltflib raises many kinds on bad files
+        raise InputError(f"not a readable glTF/GLB file ({type(error).__name__}: {error})", source=label) from None
+    blob = gltf.binary_blob() if str(path).lower().endswith(".glb") else None
+
+    def read(index: int) -> np.ndarray:
+        if not (type(index) is int and 0 <= index < len(gltf.accessors)):
+            raise InputError(f"accessor {str(index)[:20]!r} is not in the file", source=label)
+        accessor = gltf.accessors[index]
+        if accessor.bufferView is None or not 0 <= accessor.bufferView < len(gltf.bufferViews):
+            raise InputError(f"accessor {index} has no buffer view", source=label)
+        view = gltf.bufferViews[accessor.bufferView]
+        data = blob if blob is not None else _buffer_data(gltf.buffers[view.buffer].uri, Path(path).parent, label)
+        if data is None:
+            raise InputError("the GLB has no binary chunk", source=label)
+        try:
+            width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}[accessor.type]
+            dtype = {gl.FLOAT: np.float32, gl.UNSIGNED_BYTE: np.uint8, gl.UNSIGNED_SHORT: np.uint16,
+                     gl.UNSIGNED_INT: np.uint32, gl.BYTE: np.int8, gl.SHORT: np.int16}[accessor.componentType]
+        except KeyError:
+            raise InputError(f"accessor {index} has an unknown type", source=label) from None
+        item = np.dtype(dtype).itemsize * width
+        stride = view.byteStride or item
+        count = accessor.count
+        view_start, offset = view.byteOffset or 0, accessor.byteOffset or 0
+        view_length = view.byteLength or 0
+        if not (isinstance(count, int) and count >= 1 and stride >= item and view_start >= 0 and offset >= 0
+                and offset + stride * (count - 1) + item <= view_length
+                and view_start + view_length <= len(data)):
+            raise InputError(f"accessor {index} does not fit inside its buffer view", source=label)
+        raw = np.frombuffer(data, dtype=np.uint8, count=stride * (count - 1) + item, offset=view_start + offset)
+        rows = np.lib.stride_tricks.as_strided(raw, shape=(count, item), strides=(stride, 1))
+        values = np.ascontiguousarray(rows).view(dtype).reshape(accessor.count, width)
+        if accessor.normalized and dtype != np.float32:
+            values = values / np.iinfo(dtype).max
+        return values
+
+    return gltf, read
+
+
 def load_gltf_skin(path: str | os.PathLike) -> Skin:
     """The first skinned mesh of a glTF/GLB file as it stands in the file's scene, in world space.
 
@@ -124,39 +174,8 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
     unnamed, ``_2``, ``_3``... after a repeated name); ``parents`` is each joint's
     nearest ancestor node that is a joint too.
     """
-    import pygltflib as gl
-
     label = str(path)
-    try:
-        gltf = gl.GLTF2().load(str(path))
-    except Exception as error:  # pygltflib raises many kinds on bad files
-        raise InputError(f"not a readable glTF/GLB file ({type(error).__name__}: {error})", source=label) from None
-    blob = gltf.binary_blob() if str(path).lower().endswith(".glb") else None
-
-    def read(index: int) -> np.ndarray:
-        accessor = gltf.accessors[index]
-        view = gltf.bufferViews[accessor.bufferView]
-        data = blob if blob is not None else _buffer_data(gltf.buffers[view.buffer].uri, Path(path).parent, label)
-        width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}[accessor.type]
-        dtype = {gl.FLOAT: np.float32, gl.UNSIGNED_BYTE: np.uint8, gl.UNSIGNED_SHORT: np.uint16,
-                 gl.UNSIGNED_INT: np.uint32}[accessor.componentType]
-        item = np.dtype(dtype).itemsize * width
-        stride = view.byteStride or item
-        count = accessor.count
-        view_start, offset = view.byteOffset or 0, accessor.byteOffset or 0
-        view_length = view.byteLength or 0
-        # Every number checked before a strided view is made over the buffer: a hostile file
-        # must not make it read outside (a negative stride once crashed the process).
-        if not (isinstance(count, int) and count >= 1 and stride >= item and view_start >= 0 and offset >= 0
-                and offset + stride * (count - 1) + item <= view_length
-                and view_start + view_length <= len(data)):
-            raise InputError(f"accessor {index} does not fit inside its buffer view", source=label)
-        raw = np.frombuffer(data, dtype=np.uint8, count=stride * (count - 1) + item, offset=view_start + offset)
-        rows = np.lib.stride_tricks.as_strided(raw, shape=(count, item), strides=(stride, 1))
-        values = np.ascontiguousarray(rows).view(dtype).reshape(accessor.count, width)
-        if accessor.normalized and dtype != np.float32:
-            values = values / np.iinfo(dtype).max
-        return values
+    gltf, read = open_gltf(path)
 
     owner_index = next((i for i, n in enumerate(gltf.nodes) if n.mesh is not None and n.skin is not None), None)
     if owner_index is None:

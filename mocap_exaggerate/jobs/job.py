@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -255,8 +256,19 @@ def convert(
         from ..io.usd import require_usd
 
         require_usd()  # one line naming the extra, before anything is read or written
+    from ..io.gltf_motion import is_gltf
+
+    gltf_input = is_gltf(source)
+    if gltf_input and glb:  # a game character: its own mesh and weights are the skin, in its own metres
+        if skin is None and not config.glb.skin:
+            skin = Path(source)
+        if (units or config.glb.units) == "auto":
+            units = "m"
     data, label = read_source(source, label)
-    stem = check_name(name if name is not None else _default_name(source))
+    default = _default_name(source)
+    if gltf_input and config.input.clip:  # one file, many clips: each its own outputs
+        default += "_" + re.sub(r"[^A-Za-z0-9_.-]+", "_", config.input.clip)[:80]
+    stem = check_name(name if name is not None else default)
     if to_stream:
         targets = {"trails": Path(trails)} if trails is not None else {}
     else:
@@ -291,8 +303,7 @@ def convert(
                                        joint_map=character.joint_map)
 
     timings: dict[str, float] = {}
-    motion, report = read_bvh(data, name=label, fps=config.input.fps, root_offset=config.input.root_offset,
-                              up=config.input.up)
+    motion, report = read_clip(source, config.input, name=label, data=data)
     timings["read"] = time.perf_counter() - started
     warnings = list(report.warnings) + changed
     if glb:
@@ -533,6 +544,20 @@ def check_output_set(manifest: str | os.PathLike, info: dict | None = None) -> l
     return problems
 
 
+def read_clip(source: Source, settings, *, name: str | None = None, data: bytes | None = None):
+    """A clip as a `Motion` and its reader's report: a ``.glb``/``.gltf`` by one of its animations
+    (`mocap_exaggerate.io.gltf_motion`), anything else as BVH (``data``: its bytes, already read).
+
+    settings : the pipeline's `InputConfig` (``fps``, ``clip``; ``root_offset`` and ``up`` for BVH)
+    """
+    from ..io.gltf_motion import is_gltf, read_gltf_motion
+
+    if is_gltf(source):
+        return read_gltf_motion(source, fps=settings.fps, clip=settings.clip, name=name)
+    return read_bvh(source if data is None else data, name=name, fps=settings.fps,
+                    root_offset=settings.root_offset, up=settings.up)
+
+
 def _timed(func, *args):
     tick = time.perf_counter()
     return func(*args), time.perf_counter() - tick
@@ -540,9 +565,12 @@ def _timed(func, *args):
 
 def describe(source: Source, *, fps: float | None = None, limbs: bool = False, groups: bool = False,
              contacts: bool = False, label: str | None = None, root_offset: str = "auto",
-             up: str = "auto") -> dict[str, Any]:
-    """What ``info`` shows about a clip, as plain data (JSON-ready)."""
-    motion, report = read_bvh(source, name=label, fps=fps, root_offset=root_offset, up=up)
+             up: str = "auto", clip: str = "") -> dict[str, Any]:
+    """What ``info`` shows about a clip, as plain data (JSON-ready); a glTF's animations too."""
+    from ..config import InputConfig
+    from ..io.gltf_motion import gltf_animations, is_gltf
+
+    motion, report = read_clip(source, InputConfig(fps=fps, root_offset=root_offset, up=up, clip=clip), name=label)
     skeleton = motion.skeleton
     orders: dict[str, int] = {}
     for j in range(skeleton.num_joints):
@@ -566,6 +594,9 @@ def describe(source: Source, *, fps: float | None = None, limbs: bool = False, g
         "rest_frames": detect_rest_frames(motion),
         "warnings": report.warnings,
     }
+    if is_gltf(source):
+        data["clip"] = report.clip
+        data["animations"] = gltf_animations(source)
     if limbs:
         data["limbs"] = {name: [skeleton.names[j] for j in limb.joints] for name, limb in find_limbs(skeleton).items()}
     if contacts:

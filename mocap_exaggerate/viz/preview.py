@@ -69,21 +69,23 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     bound to the clip as the GLB's is (`mocap_exaggerate.rig.binding`); default: the capsule body.
     """
     from ..config import DEFAULT_PRESET, load_preset
-    from ..io.bvh import read_bvh
     from ..io.files import atomic_write
-    from ..jobs.job import Character, check_targets
+    from ..jobs.job import Character, check_targets, read_clip
     from ..pipeline import run
 
     output = Path(output)
     kind = _kind(output, trajectory)
     config = config or load_preset(DEFAULT_PRESET)
+    from ..io.gltf_motion import is_gltf
+
+    if is_gltf(source) and skin is None and not config.glb.skin:
+        skin = Path(source)  # a game character is drawn with its own mesh
     # The body drawn is the GLB's: the config's [glb] character, the arguments over it, read and checked as a job's.
     character = Character.of(config.glb, glb=True, skin=skin, joint_map=joint_map, units=None, influences=None)
     inputs = [Path(p) for p in (source, character.skin_file, character.map_file)
               if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
     check_targets({"preview": output}, inputs, overwrite)
-    motion, _ = read_bvh(source, name=label, fps=config.input.fps, root_offset=config.input.root_offset,
-                         up=config.input.up)
+    motion, _ = read_clip(source, config.input, name=label)
     where = label or (str(source) if inputs else "the clip")
     joint = joint_named(motion.skeleton, trajectory, where) if trajectory is not None else None
     skin, _ = character.bound_to(motion, where)
