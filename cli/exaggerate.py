@@ -78,7 +78,7 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
         log.info("%s: %s", record.input, note)
     if record.manifest is not None and not quiet():
         written = record.outputs
-        suffixes = {"glb": ".glb", "weights": ".weights.npz", "pipeline": ".pipeline.toml"}
+        suffixes = {"glb": ".glb", "weights": ".weights.npz", "fbx": ".fbx", "pipeline": ".pipeline.toml"}
         if "usd" in written:
             suffixes["usd"] = Path(written["usd"]).suffix
         extras = ", ".join(suffixes[k] for k in written if k in suffixes)

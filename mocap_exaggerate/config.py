@@ -155,6 +155,7 @@ class GlbConfig:
     usd : also write the same character as a UsdSkel, ``<name>.usd``, ``.usdc`` (binary) or
         ``.usda`` (text): the word is the suffix; empty for none (`mocap_exaggerate.io.usd`;
         needs the ``usd`` extra, Pixar's usd-core)
+    fbx : also write the same character as ``<name>.fbx``, by Blender (`mocap_exaggerate.io.fbx`)
     skin : the character file (a skinned ``.glb``/``.gltf``, a MakeHuman ``.obj``, an ``.npz``);
         empty for the rubber body grown from the skeleton. A relative path is relative to the
         folder of the pipeline file that holds it (a run writes it so)
@@ -176,6 +177,10 @@ class GlbConfig:
         "--usd", "Also write OUT/<name>.FORMAT: the same character as a skinned, animated UsdSkel, usd or usdc "
         "(binary) or usda (text). Needs the usd extra: pip install 'mocap-exaggerate[usd]'.", metavar="FORMAT",
         choices=USD_FORMATS))
+    fbx: bool = setting(False, flag=Flag(
+        "--fbx", "Also write OUT/<name>.fbx: the GLB's character exported by Blender (Y up, no leaf bones, every "
+        "frame baked). Needs Blender: pip install 'mocap-exaggerate[fbx]', MOCAP_BPY_PYTHON or blender on PATH.",
+        sets=True))
     skin: str = setting("", flag=Flag(
         "--skin", "Your character: a skinned .glb/.gltf, a MakeHuman .obj (+ .mhw, .mhskel beside it) or an .npz "
         "bound to the clip's joints. Made for another rig, it is fitted to the clip (joints paired by role and "
@@ -188,6 +193,7 @@ class GlbConfig:
 
     def __post_init__(self) -> None:
         check_flag("glb.enabled", self.enabled)
+        check_flag("glb.fbx", self.fbx)
         check_choice("glb.units", self.units, GLB_UNITS)
         if not isinstance(self.usd, str) or self.usd not in ("", *USD_FORMATS):
             raise ConfigError(f"glb.usd must be one of {', '.join(USD_FORMATS)} (or empty for none), got {self.usd!r:.40}")

@@ -452,8 +452,8 @@ def test_the_glb_settings_come_from_a_config_file_and_the_flags_win(runner, samp
                                  "--units", "m", "--no-glb"])
     assert result.exit_code == 0, result.stderr
     info = json.loads((tmp_path / "b" / "cmu_09_01_run_daz.json").read_text())
-    assert info["config"]["glb"] == {"enabled": False, "units": "m", "influences": 8, "skin": "", "skin_sha256": "",
-                                     "joint_map": "", "joint_map_sha256": ""}
+    assert info["config"]["glb"] == {"enabled": False, "units": "m", "influences": 8, "usd": "", "fbx": False,
+                                     "skin": "", "skin_sha256": "", "joint_map": "", "joint_map_sha256": ""}
     assert "glb" not in info["outputs"]
 
 

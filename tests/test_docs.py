@@ -9,6 +9,7 @@ quote. A line that cannot run here is listed in `NOT_RUN` with the reason.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import shutil
@@ -21,6 +22,7 @@ import pytest
 from mocap_exaggerate.config import resolve_config
 
 from .helpers import ROOT, SAMPLE_DIR, SHARED_BVH, SHARED_REASON
+from .test_blender import BPY
 
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 GENERATED = {"cli.md", "config.md"}
@@ -103,9 +105,15 @@ def _sandbox(folder: Path, command: str) -> dict:
 def test_every_command_line_in_the_docs_runs(command, tmp_path):
     if ".mp4" in command and shutil.which("ffmpeg") is None:
         pytest.skip("ffmpeg is not on PATH (the MP4 preview needs it)")
+    if "--fbx" in command and BPY is None:
+        pytest.skip("no Blender to write the FBX (set MOCAP_BPY_PYTHON, or run .ci/run which makes .bpy-venv)")
+    if "--usd" in command and importlib.util.find_spec("pxr") is None:
+        pytest.skip("usd-core is not installed (pip install 'mocap-exaggerate[usd]')")
     folder = tmp_path / "work"
     folder.mkdir()
     env = _sandbox(folder, command)
+    if BPY is not None:
+        env["MOCAP_BPY_PYTHON"] = BPY
     # Farm and shared paths stand for folders of one's own.
     line = command.replace("/shared/mocap", "mocap").replace("/shared/out", "farm_out").replace("/farm/out", "farm_out")
     done = subprocess.run(["sh", "-c", line], cwd=folder, env=env, capture_output=True, text=True, timeout=300)

@@ -183,7 +183,8 @@ def test_the_written_file_names_everything_it_used(place):
     hero = place / "work" / "characters" / "hero.glb"
     digest = hashlib.sha256(hero.read_bytes()).hexdigest()
     table = text.split("[glb]\n", 1)[1]
-    assert table == ('enabled = true\nunits = "cm"\ninfluences = 8\nusd = ""\nskin = "../../work/characters/hero.glb"\n'
+    assert table == ('enabled = true\nunits = "cm"\ninfluences = 8\nusd = ""\nfbx = false\n'
+                     'skin = "../../work/characters/hero.glb"\n'
                      f'skin_sha256 = "{digest}"\njoint_map = "../../work/characters/hero.map"\n'
                      f'joint_map_sha256 = "{hashlib.sha256((hero.parent / "hero.map").read_bytes()).hexdigest()}"\n')
     manifest = json.loads((one / "clip.json").read_text())

@@ -23,7 +23,8 @@ SAMPLES = {
     "correct.threshold": ("0.07", 0.07), "correct.delta": ("0.3", 0.3), "correct.max_stretch": ("1.2", 1.2),
     "correct.max_iter": ("77", 77), "subjoints.per_link": ("3", 3), "subjoints.sublink_length": ("3%", "3%"),
     "springs.stiffness": ("99", 99.0), "springs.link_stiffness": ("88", 88.0), "springs.damping": ("5", 5.0),
-    "springs.blend": ("0.25", 0.25), "springs.max_stretch": ("1.3", 1.3), "input.fps": ("60", 60.0), "glb.units": ("cm", "cm"),
+    "springs.blend": ("0.25", 0.25), "springs.max_stretch": ("1.3", 1.3), "input.fps": ("60", 60.0), "input.clip": ("Run", "Run"),
+    "glb.units": ("cm", "cm"),
     ".stretch": ("left_arm:10-20:2", None), ".target": ("lHand@10", None),
 }
 

@@ -54,7 +54,7 @@ class JobRecord:
     """What one `convert` call did.
 
     input : the input as named in messages
-    outputs : kind (``bvh``, ``glb``, ``weights``, ``usd``, ``pipeline``, ``trails``, ``manifest``) -> path written
+    outputs : kind (``bvh``, ``glb``, ``weights``, ``usd``, ``fbx``, ``pipeline``, ``trails``, ``manifest``) -> path written
     frames, joints : of the output motion
     max_link_stretch : largest link length over its rest length, after the stretch pass
     seconds : wall time of the whole job
@@ -98,10 +98,11 @@ def check_name(name: str) -> str:
 
 
 def output_paths(folder: str | os.PathLike, name: str, *, glb: bool = True,
-                 trails: str | os.PathLike | None = None, usd: str = "") -> dict[str, Path]:
+                 trails: str | os.PathLike | None = None, usd: str = "", fbx: bool = False) -> dict[str, Path]:
     """The files a job writes, by kind, in the order they are written (manifest last).
 
     usd : with ``glb``, the suffix of the UsdSkel file written beside the GLB (empty: none)
+    fbx : with ``glb``, an FBX of the GLB's character too
     """
     folder = Path(folder)
     name = check_name(name)
@@ -111,6 +112,8 @@ def output_paths(folder: str | os.PathLike, name: str, *, glb: bool = True,
         paths["weights"] = folder / f"{name}.weights.npz"
         if usd:
             paths["usd"] = folder / f"{name}.{usd}"
+        if fbx:
+            paths["fbx"] = folder / f"{name}.fbx"
     paths["pipeline"] = folder / f"{name}.pipeline.toml"
     if trails is not None:
         paths["trails"] = Path(trails)
@@ -157,6 +160,8 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
               "path_file": digest_of_file(path_file) if path_file is not None else None}
     if glb and config.glb.usd:  # only when asked for: digests of runs without one stay what they were
         fields["usd"] = config.glb.usd
+    if glb and config.glb.fbx:
+        fields["fbx"] = True
     if joint_map is not None:  # only when given: digests of runs without one stay what they were
         from ..rig.binding import read_joint_map
 
@@ -250,12 +255,21 @@ def convert(
     to_stream = hasattr(output, "write")
     glb = (config.glb.enabled if glb is None else glb) and not to_stream
     usd = config.glb.usd if glb else ""
-    if config.glb.usd and not glb and not to_stream:
-        raise ConfigError("glb.usd: the USD file is the GLB's character; it is written with the GLB (drop --no-glb)")
+    fbx = config.glb.fbx and glb
+    for key, asked in (("usd", config.glb.usd), ("fbx", config.glb.fbx)):
+        if asked and not glb and not to_stream:
+            raise ConfigError(f"glb.{key}: the {key.upper()} file is the GLB's character; it is written with the GLB "
+                              "(drop --no-glb)")
+    # One line naming what to install, before anything is read or written.
     if usd:
         from ..io.usd import require_usd
 
-        require_usd()  # one line naming the extra, before anything is read or written
+        require_usd()
+    blender = None
+    if fbx:
+        from ..io.fbx import require_blender
+
+        blender = require_blender()
     from ..io.gltf_motion import is_gltf
 
     gltf_input = is_gltf(source)
@@ -275,12 +289,14 @@ def convert(
         folder = Path(output)
         if folder.exists() and not folder.is_dir():
             raise ConfigError(f"{folder}: exists and is not a folder")
-        targets = output_paths(folder, stem, glb=glb, trails=trails, usd=usd)
+        targets = output_paths(folder, stem, glb=glb, trails=trails, usd=usd, fbx=fbx)
     # Outputs of an earlier run with the GLB (or a USD file) that this run will not write: they would
     # sit beside a manifest that does not list them. Refused like any output, removed with overwrite.
     from ..config import USD_FORMATS
 
     retired = [] if to_stream else [Path(output) / f"{stem}.{suffix}" for suffix in USD_FORMATS if suffix != usd]
+    if not fbx and not to_stream:
+        retired.append(Path(output) / f"{stem}.fbx")
     if not glb and not to_stream:
         retired += [Path(output) / f"{stem}.glb", Path(output) / f"{stem}.weights.npz"]
     retired = [path for path in retired if path.exists()]
@@ -347,6 +363,13 @@ def convert(
             outputs["weights"] = written.add(targets["weights"], files.weights)
             if files.usd is not None:
                 outputs["usd"] = written.add(targets["usd"], files.usd)
+            if fbx:
+                from ..io.fbx import glb_to_fbx
+
+                tick = time.perf_counter()
+                outputs["fbx"] = written.add(targets["fbx"], glb_to_fbx(b"".join(files.glb), fps=motion.fps,
+                                                                         command=blender))
+                timings["fbx"] = time.perf_counter() - tick
             del files
         if not to_stream:
             outputs["pipeline"] = written.add(targets["pipeline"], recorded.to_toml(preset=preset).encode("utf-8"))
@@ -459,7 +482,8 @@ def recorded_config(config: PipelineConfig, folder: str | os.PathLike, *, glb: b
     skin_path, skin_sha = _named(skin, folder)
     map_path, map_sha = _named(joint_map, folder) if skin_path else ("", "")
     return replace(config, glb=GlbConfig(enabled=bool(glb), units=units, influences=int(influences),
-                                         usd=config.glb.usd if glb else "", skin=skin_path,
+                                         usd=config.glb.usd if glb else "", fbx=config.glb.fbx and bool(glb),
+                                         skin=skin_path,
                                          skin_sha256=skin_sha, joint_map=map_path, joint_map_sha256=map_sha))
 
 
