@@ -435,7 +435,9 @@ BASE = {"exaggerate": ["exaggerate", "clip.bvh", "-o", "out", "--no-glb", "--sub
 TAKEN = {("exaggerate", "--output"): {b"nan", b"inf", b"-1", b"1e309", b"a\nb", b"\xff\xfe"},
          ("exaggerate", "--name"): {b"nan", b"inf", b"-1", b"1e309", b"\xff\xfe"},
          ("exaggerate", "--trails"): {b"nan", b"inf", b"-1", b"1e309", b"a\nb", b"\xff\xfe"},
-         ("preview", "--seconds"): {b"inf", b"1e309"}}
+         ("preview", "--seconds"): {b"inf", b"1e309"},
+         # An empty animation name is none: a glTF's first (and a BVH's one clip).
+         ("exaggerate", "--clip"): {b""}, ("info", "--clip"): {b""}}
 
 
 def _swept_options() -> list:

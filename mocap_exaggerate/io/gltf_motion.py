@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -76,9 +77,24 @@ def read_gltf_motion(path: str | os.PathLike, *, fps: float | None = None, clip:
 
     clip : the animation's name ("" takes the first); fps : None samples at the keys' own
     rate where at least four in five of their steps are one step of 1/240-1/10 s, else at
-    `DEFAULT_GLTF_FPS`.
+    `DEFAULT_GLTF_FPS`. A file that is not what glTF says is one `InputError` line.
     """
     label = name or str(path)
+    if not Path(path).is_file():
+        raise InputError("no such file" if not Path(path).exists() else "is not a file", source=label)
+    try:
+        return _read(path, fps, clip, label)
+    except InputError:
+        raise
+    except PermissionError:
+        raise InputError("permission denied", source=label) from None
+    except (ValueError, TypeError, KeyError, IndexError, OverflowError, AttributeError, RecursionError,
+            np.linalg.LinAlgError) as error:  # a field of the wrong kind, an accessor past its buffer...
+        raise InputError(f"not a readable glTF animation ({type(error).__name__}: {str(error)[:120]})",
+                         source=label) from None
+
+
+def _read(path, fps: float | None, clip: str, label: str) -> tuple[Motion, GltfReport]:
     gltf, read = open_gltf(path)
     nodes = gltf.nodes or []
     owner = next((n for n in nodes if n.mesh is not None and n.skin is not None), None)

@@ -578,6 +578,9 @@ def read_clip(source: Source, settings, *, name: str | None = None, data: bytes 
 
     if is_gltf(source):
         return read_gltf_motion(source, fps=settings.fps, clip=settings.clip, name=name)
+    if settings.clip:
+        raise ConfigError(f"input.clip (--clip) names one of a .glb/.gltf's animations; {name or source} is a "
+                          "BVH, which holds one clip")
     return read_bvh(source if data is None else data, name=name, fps=settings.fps,
                     root_offset=settings.root_offset, up=settings.up)
 
