@@ -157,6 +157,8 @@ def find_limbs(skeleton: Skeleton, explicit: dict[str, list[str]] | None = None)
             if base <= 0 or end is None:
                 continue
             limbs[f"{side}_{kind}"] = Limb(f"{side}_{kind}", (base, middle, end))
+    if "left_leg" not in limbs and "right_leg" not in limbs:
+        limbs.update(_legs_by_shape(skeleton, limbs, lateral))
 
     if "left_arm" in limbs and "right_arm" in limbs:
         chest = _common_ancestor(skeleton, limbs["left_arm"].base, limbs["right_arm"].base)
@@ -192,6 +194,61 @@ def find_limbs(skeleton: Skeleton, explicit: dict[str, list[str]] | None = None)
                 raise ValueError(f"limb {name}: {skeleton.names[upper]} is not above {skeleton.names[lower]}")
         limbs[name] = Limb(name, joints)
     return {name: limbs[name] for name in sorted(limbs, key=lambda n: (LIMB_NAMES + (n,)).index(n))}
+
+
+#: A chain stands on the floor when its end rests within this share of the height of the lowest end.
+STANDING = 0.15
+
+
+def _legs_by_shape(skeleton: Skeleton, found: dict[str, Limb], lateral: int) -> dict[str, Limb]:
+    """Legs where their names do not say so (a fox's ``b_LeftLeg01_015``), from the rest pose's shape.
+
+    A leg is a chain of at least three joints hanging from a branch joint (hips) to an end that
+    rests on the floor: within `STANDING` of the height of the lowest chain end. Chains already
+    taken as arms (a quadruped's front legs, named as arms) are not legs again. Exactly two
+    left make the pair, sided by which way they lie across the body; the limb is the chain's
+    first three joints (hip, knee, ankle), what is below the ankle rides on it as toes do.
+    """
+    rest = skeleton.rest_positions()
+    up = skeleton.up_axis()
+    height = max(skeleton.height(), 1e-12)
+    children = [list(skeleton.children(j)) for j in range(skeleton.num_joints)]
+    chains = []
+    for leaf in range(1, skeleton.num_joints):
+        if children[leaf] or _HELPER.search(skeleton.names[leaf]):
+            continue
+        chain = [leaf]
+        while skeleton.parents[chain[-1]] > 0 and len(children[skeleton.parents[chain[-1]]]) == 1:
+            chain.append(int(skeleton.parents[chain[-1]]))
+        chains.append(chain[::-1])
+    if not chains:
+        return {}
+    low = min(rest[c[-1], up] for c in chains)  # rest poses stand along +up (the GLB turns the rest)
+    taken = {j for limb in found.values() for j in limb.joints}
+    legs = [c for c in chains if len(c) >= 3 and not taken & set(c)
+            and rest[c[-1], up] <= low + STANDING * height
+            and rest[c[0], up] - rest[c[-1], up] > 0.25 * height]
+    if len(legs) != 2:
+        return {}
+    order = np.argsort([-rest[c[0], lateral] for c in legs])  # +X is the left of a body facing +Z
+    return {f"{side}_leg": Limb(f"{side}_leg", tuple(legs[k][:3])) for side, k in zip(("left", "right"), order)}
+
+
+def standing_ends(skeleton: Skeleton, limbs: dict[str, Limb], heights: np.ndarray | None = None) -> list[int]:
+    """The ends the body stands on: the legs', and an arm's whose end goes about as low as theirs
+    over the clip (a quadruped's front paws, found as arms; a crawl's hands).
+
+    heights : (F, J) each joint's height above the floor over the clip (up along the ground's
+        axis); without them, the legs' ends alone (rest poses cannot tell: iClone's rest has the
+        arms and legs pointing up beside the spine)
+    """
+    feet = [limbs[name].end for name in ("left_leg", "right_leg") if name in limbs]
+    if not feet or heights is None or not len(heights):
+        return feet
+    low = float(np.median(heights[:, feet]))
+    more = [limbs[name].end for name in ("left_arm", "right_arm") if name in limbs
+            and float(np.median(heights[:, limbs[name].end])) <= low + STANDING * skeleton.height()]
+    return feet + more
 
 
 def _find_head(skeleton: Skeleton, chest: int, sizes: np.ndarray) -> int | None:

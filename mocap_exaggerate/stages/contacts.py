@@ -302,8 +302,16 @@ def find_effectors(skeleton: Skeleton, limbs: dict[str, Limb], rigid: np.ndarray
 
 
 def resolve_effector(name: str, skeleton: Skeleton, limbs: dict[str, Limb], effectors: dict[int, Effector],
-                     what: str) -> list[int]:
-    """End-effector joints for a name: ``feet``, ``hands``, a limb or a joint; ConfigError otherwise."""
+                     what: str, heights: np.ndarray | None = None) -> list[int]:
+    """End-effector joints for a name: ``feet``, ``hands``, a limb or a joint; ConfigError otherwise.
+
+    heights : (F, J) the capture's heights above the floor: ``feet`` are then also the arms' ends
+        that go as low as the legs' (`mocap_exaggerate.analysis.limbs.standing_ends`: a fox's front paws)
+    """
+    if name == "feet":
+        from ..analysis.limbs import standing_ends
+
+        return [end for end in standing_ends(skeleton, limbs, heights) if end in effectors]
     if name in _SETS:
         return [limbs[limb].end for limb in _SETS[name] if limb in limbs and limbs[limb].end in effectors]
     if name in limbs:
@@ -388,9 +396,10 @@ def find_contacts(skeleton: Skeleton, captured_pos: np.ndarray, frame_time: floa
                   effectors: dict[int, Effector], config: ContactConfig) -> tuple[Ground, dict[int, np.ndarray]]:
     """The ground, and the contact ranges ``(R, 2)`` of every end effector ``config.joints`` names."""
     ground = find_ground(skeleton, captured_pos, limbs)
+    heights = ground.sign * captured_pos[..., ground.axis] - ground.floor
     watched: list[int] = []
     for name in config.joints:
-        for joint in resolve_effector(name, skeleton, limbs, effectors, "contacts.joints"):
+        for joint in resolve_effector(name, skeleton, limbs, effectors, "contacts.joints", heights):
             if joint not in watched:
                 watched.append(joint)
     return ground, {joint: detect_contacts(captured_pos, effectors[joint], ground, frame_time, config)

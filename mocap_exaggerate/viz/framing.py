@@ -113,10 +113,22 @@ def view_axes(skeleton: Skeleton, root_path: np.ndarray) -> tuple[int, int, int]
     """(right, up, depth): look along the horizontal axis the root moves least along (from its side).
 
     root_path : (F, 3) root positions over the clip
+    A body that stays in place (a loop on a treadmill) and whose spine lies along the ground (a
+    fox, a cat) is seen from the side of its spine, not from its nose.
     """
     up = skeleton.up_axis()
     horizontal = [a for a in range(3) if a != up]
     spread = np.ptp(root_path[:, horizontal], axis=0) if len(root_path) else np.zeros(2)
+    if spread.max() < 0.25 * skeleton.height():
+        from ..analysis.limbs import find_limbs
+
+        spine = find_limbs(skeleton).get("spine")
+        if spine is not None:
+            rest = skeleton.rest_positions()
+            along = rest[spine.end] - rest[spine.base]
+            if abs(along[up]) < 0.7 * np.linalg.norm(along):  # more along the ground than up
+                length = horizontal[int(np.argmax(np.abs(along[horizontal])))]
+                return length, up, next(a for a in horizontal if a != length)
     depth = horizontal[int(np.argmin(spread))]
     right = horizontal[int(np.argmax(spread))] if spread.max() > 0 else horizontal[0]
     return right, up, depth
