@@ -159,7 +159,13 @@ def open_gltf(path: str | os.PathLike):
 
 
 def load_gltf_skin(path: str | os.PathLike) -> Skin:
-    """The first skinned mesh of a glTF/GLB file as it stands in the file's scene, in world space.
+    """A glTF/GLB file's character as it stands in the file's scene, in world space: every mesh that
+    rides on the skeleton of its first skinned mesh.
+
+    The skeleton is the first skinned mesh's skin. Its mesh, every other mesh skinned to joints of
+    the same skeleton, and every mesh whose node hangs below one of its joints (a game character
+    made of rigid pieces parented to its bones, as the Quaternius robot is; such a piece moves
+    with its nearest joint, weight 1), all their triangle primitives, make one skin.
 
     Node transforms count (an armature turned Z-up to Y-up, scaled by 0.01, a
     mesh node moved): a viewer draws the bind pose at ``world(joint) @ IBM @ v``,
@@ -183,51 +189,44 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
     if not joint_nodes or not all(type(j) is int and 0 <= j < len(gltf.nodes) for j in joint_nodes):
         raise InputError("the skin's joints must be node numbers", source=label)
     names = _unique_names([gltf.nodes[j].name or f"joint{j}" for j in joint_nodes])
-    primitive = gltf.meshes[owner.mesh].primitives[0]
-    attributes = primitive.attributes
-    if attributes.JOINTS_0 is None or attributes.WEIGHTS_0 is None:
-        raise InputError("the mesh has no JOINTS_0/WEIGHTS_0", source=label)
-    vertices = read(attributes.POSITION).astype(np.float64)
-    joints = [read(attributes.JOINTS_0)]
-    weights = [read(attributes.WEIGHTS_0)]
-    if getattr(attributes, "JOINTS_1", None) is not None and getattr(attributes, "WEIGHTS_1", None) is not None:
-        joints.append(read(attributes.JOINTS_1))
-        weights.append(read(attributes.WEIGHTS_1))
-    joints = np.concatenate(joints, axis=1).astype(np.int64)
-    weights = np.concatenate(weights, axis=1).astype(np.float64)
-    faces = read(primitive.indices).reshape(-1, 3) if primitive.indices is not None else np.arange(len(vertices)).reshape(-1, 3)
-    faces = faces.astype(np.int64)
-
     world, parent = _world_matrices(gltf.nodes, label)
-    inverse = np.tile(np.eye(4), (len(joint_nodes), 1, 1))
-    if skin_def.inverseBindMatrices is not None:
-        stored = read(skin_def.inverseBindMatrices)
-        if stored.shape[1] != 16 or len(stored) < len(joint_nodes):
-            raise InputError(f"the skin has {len(joint_nodes)} joints but {len(stored)} inverse bind matrices",
-                             source=label)
-        # glTF matrices are column-major: each row read is the transpose.
-        inverse = stored[: len(joint_nodes)].reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
-        if not np.all(np.isfinite(inverse)):
-            raise InputError("inverse bind matrices must be finite numbers", source=label)
-    placed = world[joint_nodes] @ inverse  # (J, 4, 4): where each joint draws the mesh at bind
-    corners = np.ones((8, 4))
-    corners[:, :3] = np.where((np.arange(8)[:, None] >> np.arange(3)) & 1, vertices.max(axis=0), vertices.min(axis=0))
-    # The bounding box's corners bound how far apart any two matrices take any vertex.
-    reached = np.einsum("jab,cb->jca", placed[:, :3], corners)  # (J, 8, 3)
-    middle = reached.mean(axis=0)
-    size = float(np.linalg.norm(middle.max(axis=0) - middle.min(axis=0)))
-    if np.max(np.linalg.norm(reached - middle, axis=-1)) <= 1e-4 * max(size, 1e-12):
-        transform = placed.mean(axis=0)
-        bind_world = world[joint_nodes]
-    else:
-        transform = world[owner_index]
-        try:
-            bind_world = transform @ np.linalg.inv(inverse)
-        except np.linalg.LinAlgError:
-            raise InputError("an inverse bind matrix cannot be inverted", source=label) from None
-    vertices = vertices @ transform[:3, :3].T + transform[:3, 3]
-    if np.linalg.det(transform[:3, :3]) < 0:
-        faces = faces[:, ::-1]  # a mirror turns the winding inside out: turn it back
+    column = {node: k for k, node in enumerate(joint_nodes)}
+
+    vertices, joints, weights, faces = _skinned_piece(gltf, read, owner_index, column, world, label)
+    bind_world = vertices.pop()  # the owner's: where its joints stand at bind
+    pieces = [(vertices[0], joints, weights, faces)]
+    for number, node in enumerate(gltf.nodes):
+        if number == owner_index or node.mesh is None:
+            continue
+        if node.skin is not None:  # another piece skinned to the same skeleton (a hand, a head)
+            other = gltf.skins[node.skin] if 0 <= node.skin < len(gltf.skins) else None
+            if other is None or not set(other.joints or []) <= set(column):
+                continue
+            more, j, w, f = _skinned_piece(gltf, read, number, column, world, label)
+            pieces.append((more[0], j, w, f))
+            continue
+        carrier = number  # a rigid piece: on the nearest joint at or above its node
+        while carrier >= 0 and carrier not in column:
+            carrier = int(parent[carrier])
+        if carrier < 0:
+            continue
+        # Where the piece stands when its joint stands at bind: the joint's bind over its node's rest.
+        placed = bind_world[column[carrier]] @ np.linalg.inv(world[carrier]) @ world[number]
+        for points, triangles in _primitives(gltf, read, node.mesh):
+            moved = points @ placed[:3, :3].T + placed[:3, 3]
+            if np.linalg.det(placed[:3, :3]) < 0:
+                triangles = triangles[:, ::-1]
+            one = np.zeros((len(points), joints.shape[1]), dtype=np.int64)
+            one[:, 0] = column[carrier]
+            weight = np.zeros((len(points), joints.shape[1]))
+            weight[:, 0] = 1.0
+            pieces.append((moved, one, weight, triangles))
+    width = max(p[1].shape[1] for p in pieces)
+    start = np.cumsum([0] + [len(p[0]) for p in pieces[:-1]])
+    vertices = np.concatenate([p[0] for p in pieces])
+    joints = np.concatenate([np.pad(p[1], ((0, 0), (0, width - p[1].shape[1]))) for p in pieces])
+    weights = np.concatenate([np.pad(p[2], ((0, 0), (0, width - p[2].shape[1]))) for p in pieces])
+    faces = np.concatenate([p[3] + s for p, s in zip(pieces, start)])
     bind = {name: matrix[:3, 3].copy() for name, matrix in zip(names, bind_world)}
 
     joint_name = {}
@@ -244,6 +243,80 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
     rows = np.repeat(np.arange(len(vertices)), joints.shape[1])
     top_j, top_w = top_influences(rows, joints.ravel(), weights.ravel(), len(vertices), 8)
     return Skin(vertices, np.ascontiguousarray(faces), names, top_j, top_w, bind, parents)
+
+
+def _primitives(gltf, read, mesh: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each triangle primitive of a mesh: its positions (V, 3) and faces (T, 3) (points and lines are not a body)."""
+    out = []
+    for primitive in gltf.meshes[mesh].primitives or []:
+        if primitive.mode not in (None, 4):
+            continue
+        points = read(primitive.attributes.POSITION).astype(np.float64)
+        faces = (read(primitive.indices).reshape(-1, 3) if primitive.indices is not None
+                 else np.arange(len(points) - len(points) % 3).reshape(-1, 3)).astype(np.int64)
+        out.append((points, faces))
+    return out
+
+
+def _skinned_piece(gltf, read, number: int, column: dict[int, int], world: np.ndarray, label: str):
+    """A skinned mesh node's first primitive in the bind pose, in world space, its joints as ``column``
+    numbers them: ``([vertices, bind_world], joints, weights, faces)``, ``bind_world`` (J, 4, 4)
+    where its skin's joints stand at bind (identity rows for joints it does not use)."""
+    node = gltf.nodes[number]
+    skin_def = gltf.skins[node.skin]
+    own = list(skin_def.joints or [])
+    if not own or not all(type(j) is int and 0 <= j < len(gltf.nodes) for j in own):
+        raise InputError("the skin's joints must be node numbers", source=label)
+    primitive = gltf.meshes[node.mesh].primitives[0]
+    attributes = primitive.attributes
+    if attributes.JOINTS_0 is None or attributes.WEIGHTS_0 is None:
+        raise InputError("the mesh has no JOINTS_0/WEIGHTS_0", source=label)
+    vertices = read(attributes.POSITION).astype(np.float64)
+    joints = [read(attributes.JOINTS_0)]
+    weights = [read(attributes.WEIGHTS_0)]
+    if getattr(attributes, "JOINTS_1", None) is not None and getattr(attributes, "WEIGHTS_1", None) is not None:
+        joints.append(read(attributes.JOINTS_1))
+        weights.append(read(attributes.WEIGHTS_1))
+    joints = np.concatenate(joints, axis=1).astype(np.int64)
+    weights = np.concatenate(weights, axis=1).astype(np.float64)
+    faces = read(primitive.indices).reshape(-1, 3) if primitive.indices is not None else np.arange(len(vertices)).reshape(-1, 3)
+    faces = faces.astype(np.int64)
+
+    inverse = np.tile(np.eye(4), (len(own), 1, 1))
+    if skin_def.inverseBindMatrices is not None:
+        stored = read(skin_def.inverseBindMatrices)
+        if stored.shape[1] != 16 or len(stored) < len(own):
+            raise InputError(f"the skin has {len(own)} joints but {len(stored)} inverse bind matrices",
+                             source=label)
+        # glTF matrices are column-major: each row read is the transpose.
+        inverse = stored[: len(own)].reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
+        if not np.all(np.isfinite(inverse)):
+            raise InputError("inverse bind matrices must be finite numbers", source=label)
+    placed = world[own] @ inverse  # (J, 4, 4): where each joint draws the mesh at bind
+    corners = np.ones((8, 4))
+    corners[:, :3] = np.where((np.arange(8)[:, None] >> np.arange(3)) & 1, vertices.max(axis=0), vertices.min(axis=0))
+    # The bounding box's corners bound how far apart any two matrices take any vertex.
+    reached = np.einsum("jab,cb->jca", placed[:, :3], corners)  # (J, 8, 3)
+    middle = reached.mean(axis=0)
+    size = float(np.linalg.norm(middle.max(axis=0) - middle.min(axis=0)))
+    if np.max(np.linalg.norm(reached - middle, axis=-1)) <= 1e-4 * max(size, 1e-12):
+        transform = placed.mean(axis=0)
+        stood = world[own]
+    else:
+        transform = world[number]
+        try:
+            stood = transform @ np.linalg.inv(inverse)
+        except np.linalg.LinAlgError:
+            raise InputError("an inverse bind matrix cannot be inverted", source=label) from None
+    vertices = vertices @ transform[:3, :3].T + transform[:3, 3]
+    if np.linalg.det(transform[:3, :3]) < 0:
+        faces = faces[:, ::-1]  # a mirror turns the winding inside out: turn it back
+    if np.any(joints >= len(own)) or np.any(joints < 0):
+        raise IndexError(f"a vertex names joint {int(joints.max())} of a skin of {len(own)}")
+    bind_world = np.tile(np.eye(4), (len(column), 1, 1))
+    mapped = np.array([column[j] for j in own], dtype=np.int64)
+    bind_world[mapped] = stood
+    return [vertices, bind_world], mapped[joints], weights, faces
 
 
 def _unique_names(names: list[str]) -> tuple[str, ...]:
