@@ -4,8 +4,8 @@ Prints, best and median of several runs each:
 - ``mocap-exaggerate exaggerate`` with every default output (BVH, GLB, weights,
   pipeline, manifest) on a 10,000-frame 31-joint CMU clip (the shared
   cmu_01_01 clip's motion lines tiled), with its peak RSS;
-- the same with ``--usd usdc`` and ``--usd usda`` (where usd-core is installed), and the sizes of
-  the BVH, GLB and USD files;
+- the same with ``--usd usdc`` and ``--usd usda`` (where usd-core is installed) and ``--fbx`` (where
+  Blender is: ``MOCAP_BPY_PYTHON``), and the sizes of the BVH, GLB, USD and FBX files;
 - ``mocap-exaggerate --help`` and ``info`` on a short clip (start-up cost);
 - what the command imports, and why the library evaluates its own Bézier
   curves instead of scipy's CubicHermiteSpline.
@@ -125,6 +125,14 @@ def main() -> None:
                 report(f"exaggerate, {args.frames} frames, all + --usd {suffix}", runs)
                 sizes[suffix] = (out / f"{long_clip.stem}.{suffix}").stat().st_size
             sizes["glb"] = (out / f"{long_clip.stem}.glb").stat().st_size
+        from mocap_exaggerate.io.fbx import blender_command
+
+        if blender_command() is None:
+            print("FBX: no Blender (MOCAP_BPY_PYTHON, bpy or blender on PATH); not measured")
+        else:  # once: Blender's import, bake and export take tens of seconds
+            report(f"exaggerate, {args.frames} frames, all + --fbx (once)",
+                   [run_process(CLI + ["-q", "exaggerate", str(long_clip), "-o", str(out), "--overwrite", "--fbx"])])
+            sizes["fbx"] = (out / f"{long_clip.stem}.fbx").stat().st_size
         print("file sizes: " + ", ".join(f".{kind} {size / 1e6:.1f} MB" for kind, size in sizes.items()))
     report("--help", [run_process(CLI + ["--help"]) for _ in range(args.repeat)], 0.3)
     report(f"info {short.name}", [run_process(CLI + ["info", str(short)]) for _ in range(args.repeat)], 0.6)
