@@ -82,3 +82,21 @@ def test_a_fox_on_the_spot_is_seen_from_its_side():
     motion = _fox("Run")  # a loop on the spot: the root does not travel
     right, up, depth = view_axes(motion.skeleton, motion.world_positions()[:, 0])
     assert (right, up, depth) == (2, 1, 0)  # along its spine (z) across the picture, from its flank (x)
+
+
+@pytest.mark.parametrize("clip", ["Walk", "Run"])
+def test_the_tail_whips_with_the_springs(clip):
+    from dataclasses import replace
+
+    motion = _fox(clip)
+    looney = load_preset("looney")
+    springs, still = (run(motion, config) for config in (looney, replace(looney, springs=replace(looney.springs,
+                                                                                                  enabled=False))))
+    tip = springs.original_index[motion.skeleton.index("b_Tail03_014")]
+    lag = np.linalg.norm(springs.world_positions[:, tip] - still.world_positions[:, tip], axis=-1)
+    assert lag.max() > 0.05 * motion.skeleton.height()  # it swings behind the body (0.10-0.11 h)
+    # and stays a tail: no sub-link of it past looney's range of stretch
+    tail = [motion.skeleton.index(n) for n in ("b_Tail01_012", "b_Tail02_013", "b_Tail03_014")]
+    lengths = np.linalg.norm(np.diff(springs.world_positions[:, springs.original_index[tail]], axis=1), axis=-1)
+    rest = np.linalg.norm(np.diff(motion.skeleton.rest_positions()[tail], axis=0), axis=-1)
+    assert (lengths / rest).max() <= 1.76

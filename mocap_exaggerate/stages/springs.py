@@ -406,7 +406,9 @@ def hanging_links(skeleton, hierarchy, limbs: dict, blend: float) -> tuple[np.nd
     cartoon torsos do not (the Stretch-Engine thesis's Table 1), and a lagging collar spun the
     chest round. The follow-through grows along a limb's first link, from none at the shoulder
     or hip to all of it at the elbow or knee: a sub-joint next to a fixed root swinging fully
-    kinked the limb there. Without arms or legs found, every non-rigid link swings by ``blend``.
+    kinked the limb there. A rubber chain that is neither a limb nor the body's own (the spine
+    and the neck) hangs and swings too: a tail, long ears, a trunk (`tails`). Without arms or
+    legs found, every non-rigid link swings by ``blend``.
     """
     active = ~hierarchy.rigid[hierarchy.link_child]
     hung = [limb for name, limb in limbs.items() if name.endswith(("_arm", "_leg"))]
@@ -416,9 +418,22 @@ def hanging_links(skeleton, hierarchy, limbs: dict, blend: float) -> tuple[np.nd
     for limb in hung:
         hanging[limb_joints(skeleton, limb)] = True
     hanging[[limb.base for limb in hung]] = False
+    starts = [limb.joints[1] for limb in hung]
+    for chain in tails(hierarchy.groups, limbs, hanging):
+        hanging[list(chain[1:])] = True
+        starts.append(chain[1])
     active &= hanging[hierarchy.link_child]
     weights = np.full(len(hierarchy.link_child), float(blend))
-    for limb in hung:
-        first = hierarchy.link_child == limb.joints[1]
+    for start in starts:
+        first = hierarchy.link_child == start
         weights[first] *= smootherstep(hierarchy.fraction[first])
     return active, weights
+
+
+def tails(groups, limbs: dict, hanging: np.ndarray) -> list[tuple[int, ...]]:
+    """The rubber chains (`SubjointHierarchy.groups`: each from the joint it hangs off) that are
+    neither a limb nor the body's own spine and neck: a fox's tail. A human's groups are its
+    limbs, spine and neck, so none."""
+    body = {j for name in ("spine", "neck") if name in limbs for j in limbs[name].joints}
+    taken = body | {int(j) for j in np.flatnonzero(hanging)} | {limb.base for limb in limbs.values()}
+    return [chain for chain in groups if len(chain) > 1 and not taken & set(chain[1:])]
