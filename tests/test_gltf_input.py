@@ -142,6 +142,23 @@ def test_a_character_of_many_pieces_moves_every_piece_as_the_file_does():
         assert np.abs(ours - _own_skinning(ROBOT, "Wave", key, every_mesh=True)).max() <= 1e-4 * size
 
 
+def test_step_keys_hold_from_their_own_frame():
+    # A key stored a float32 hair after its frame's time still holds from that frame, not the next.
+    motion, _ = read_gltf_motion(FOX, clip="Walk")
+    stepped = pygltflib.GLTF2().load(str(FOX))
+    for sampler in stepped.animations[1].samplers:
+        sampler.interpolation = "STEP"
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as folder:
+        copy = Path(folder) / "fox_step.glb"
+        stepped.save_binary(str(copy))
+        held, _ = read_gltf_motion(copy, clip="Walk")
+    # At 24 fps every frame is a key: STEP and LINEAR give the same poses.
+    assert np.abs(held.world_positions() - motion.world_positions()).max() < 1e-4 * motion.skeleton.height()
+
+
 def test_an_identity_run_on_a_glb_writes_the_input_characters_own_skinning(tmp_path):
     record = convert(FOX, tmp_path, _identity(), name="fox")
     assert record.outputs["glb"].exists()
@@ -174,6 +191,8 @@ def test_animations_are_listed_and_taken_by_name():
     motion, report = read_gltf_motion(ROBOT, clip="Walking", fps=60)
     assert report.clip == "Walking" and motion.fps == pytest.approx(60.0)
     assert motion.num_frames == int(np.floor(0.958333 * 60 + 1e-6)) + 1
+    # Key times are float32: the Dance's 81 keys over 3.3333 s are 81 frames at their 24 fps, not 80.
+    assert read_gltf_motion(ROBOT, clip="Dance")[0].num_frames == 81
     with pytest.raises(InputError, match="no animation called 'Moonwalk'"):
         read_gltf_motion(ROBOT, clip="Moonwalk")
 

@@ -46,6 +46,12 @@ import bpy
 
 argv = sys.argv[sys.argv.index("--") + 1:]
 glb, fbx, fps = argv[0], argv[1], float(argv[2])
+# The same input, the same bytes: the header's creation time is the exporter's only clock.
+import datetime
+import io_scene_fbx.export_fbx_bin as fbx_bin
+_header = fbx_bin.fbx_header_elements
+fbx_bin.fbx_header_elements = lambda root, scene_data, time=None: _header(root, scene_data,
+                                                                          datetime.datetime(2000, 1, 1))
 bpy.ops.wm.read_factory_settings(use_empty=True)
 scene = bpy.context.scene
 scene.render.fps = int(round(fps))
@@ -93,8 +99,10 @@ def glb_to_fbx(glb: bytes, *, fps: float, command: list[str] | None = None, time
         source, target = Path(folder) / "in.glb", Path(folder) / "out.fbx"
         source.write_bytes(glb)
         try:
+            # Blender numbers the FBX's objects through Python's hashing: one seed, one file.
             done = subprocess.run([*command, _SCRIPT, "--", str(source), str(target), repr(float(fps))],
-                                  capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+                                  capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL,
+                                  env={**os.environ, "PYTHONHASHSEED": "0"})
         except subprocess.TimeoutExpired:
             raise MocapError(f"Blender took more than {timeout:g} s to write the FBX") from None
         except OSError as error:

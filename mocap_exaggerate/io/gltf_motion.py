@@ -29,7 +29,7 @@ from ..core.kinematics import local_from_world
 from ..core.motion import Motion
 from ..core.rotations import quat_from_matrix, quat_normalize, quat_slerp
 from ..core.skeleton import Skeleton
-from .skin import _node_local, _unique_names, _world_matrices, open_gltf
+from .skin import _node_local, _skinned_piece, _unique_names, _world_matrices, open_gltf
 
 __all__ = ["GLTF_SUFFIXES", "is_gltf", "GltfReport", "gltf_animations", "read_gltf_motion", "DEFAULT_GLTF_FPS"]
 
@@ -61,6 +61,16 @@ class GltfReport:
 
 def gltf_animations(path: str | os.PathLike) -> list[dict]:
     """Each animation of the file: its name, duration (s), number of channels and of keys."""
+    try:
+        return _animations(path)
+    except InputError:
+        raise
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError) as error:
+        raise InputError(f"not a readable glTF animation ({type(error).__name__}: {str(error)[:120]})",
+                         source=str(path)) from None
+
+
+def _animations(path) -> list[dict]:
     gltf, read = open_gltf(path)
     out = []
     for number, animation in enumerate(gltf.animations or []):
@@ -147,7 +157,7 @@ def _read(path, fps: float | None, clip: str, label: str) -> tuple[Motion, GltfR
     start = min(t[0] for t in ends)
     stop = max(t[-1] for t in ends)
     rate = float(fps) if fps else _key_rate(ends)
-    count = int(np.floor((stop - start) * rate + 1e-6)) + 1
+    count = int(np.floor((stop - start) * rate + 1e-3)) + 1  # key times are float32: 79.999998 frames is 80
     if count > MAX_FRAMES:
         raise InputError(f"animation {names[chosen]!r} at {rate:g} fps is {count} frames; at most {MAX_FRAMES}",
                          source=label)
@@ -164,23 +174,18 @@ def _read(path, fps: float | None, clip: str, label: str) -> tuple[Motion, GltfR
         raise InputError("the animated node transforms are not finite numbers", source=label)
 
     # The rest pose: the skin's bind pose where it gives one (its inverse bind matrices), else the rest nodes.
+    # Where the skin loader puts the joints at bind (`mocap_exaggerate.io.skin.load_gltf_skin`), so the
+    # motion and the character agree: the nodes as they stand when they stand at bind (the mesh
+    # node's own transform is ignored, as glTF says), else the mesh node's world over the IBMs.
     bind = rest_world[order].copy()
-    if skin.inverseBindMatrices is not None:
-        stored = read(skin.inverseBindMatrices)
-        if stored.shape[1] != 16 or len(stored) < len(joints):
-            raise InputError(f"the skin has {len(joints)} joints but {len(stored)} inverse bind matrices", source=label)
-        inverse = stored[: len(joints)].reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
-        try:
-            placed = np.linalg.inv(inverse)  # the joints' world matrices at bind, in the skin's space
-        except np.linalg.LinAlgError:
-            raise InputError("an inverse bind matrix cannot be inverted", source=label) from None
-        mesh = rest_world[nodes.index(owner)]
-        for j, node in enumerate(joints):
-            bind[index[node]] = mesh @ placed[j]
-        # Nodes between the joints that the skin leaves out stand where their rest tree puts them under the bind.
-        for k, node in enumerate(order):
-            if node not in joints and parents[k] >= 0:
-                bind[k] = bind[parents[k]] @ _node_local(nodes[node], node, label)
+    column = {node: k for k, node in enumerate(joints)}
+    (_, stood), *_ = _skinned_piece(gltf, read, nodes.index(owner), column, rest_world, label)
+    for node, k in column.items():
+        bind[index[node]] = stood[k]
+    # Nodes between the joints that the skin leaves out stand where their rest tree puts them under the bind.
+    for k, node in enumerate(order):
+        if node not in column and parents[k] >= 0:
+            bind[k] = bind[parents[k]] @ _node_local(nodes[node], node, label)
     positions = world[..., :3, 3]
     turn = _rotation_of(world[..., :3, :3])
     rest_turn = _rotation_of(bind[:, :3, :3])
@@ -286,8 +291,9 @@ def _sample(keys: np.ndarray, values: np.ndarray, mode: str, times: np.ndarray, 
     before = after - 1
     span = keys[after] - keys[before]
     u = np.clip(np.divide(times - keys[before], span, out=np.zeros_like(times), where=span > 0), 0.0, 1.0)
-    if mode == "STEP":
-        return values[np.where(u >= 1.0, after, before)]
+    if mode == "STEP":  # a key stored a float32 hair late still holds from its own frame
+        held = np.clip(np.searchsorted(keys, times + 1e-5, side="right") - 1, 0, len(keys) - 1)
+        return values[held]
     if rotation:
         a = quat_normalize(values[before])
         b = quat_normalize(values[after])

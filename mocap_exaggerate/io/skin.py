@@ -259,28 +259,39 @@ def _primitives(gltf, read, mesh: int) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def _skinned_piece(gltf, read, number: int, column: dict[int, int], world: np.ndarray, label: str):
-    """A skinned mesh node's first primitive in the bind pose, in world space, its joints as ``column``
-    numbers them: ``([vertices, bind_world], joints, weights, faces)``, ``bind_world`` (J, 4, 4)
-    where its skin's joints stand at bind (identity rows for joints it does not use)."""
+    """A skinned mesh node's triangle primitives in the bind pose, in world space, its joints as
+    ``column`` numbers them: ``([vertices, bind_world], joints, weights, faces)``, ``bind_world``
+    (J, 4, 4) where its skin's joints stand at bind (identity rows for joints it does not use)."""
     node = gltf.nodes[number]
     skin_def = gltf.skins[node.skin]
     own = list(skin_def.joints or [])
     if not own or not all(type(j) is int and 0 <= j < len(gltf.nodes) for j in own):
         raise InputError("the skin's joints must be node numbers", source=label)
-    primitive = gltf.meshes[node.mesh].primitives[0]
-    attributes = primitive.attributes
-    if attributes.JOINTS_0 is None or attributes.WEIGHTS_0 is None:
-        raise InputError("the mesh has no JOINTS_0/WEIGHTS_0", source=label)
-    vertices = read(attributes.POSITION).astype(np.float64)
-    joints = [read(attributes.JOINTS_0)]
-    weights = [read(attributes.WEIGHTS_0)]
-    if getattr(attributes, "JOINTS_1", None) is not None and getattr(attributes, "WEIGHTS_1", None) is not None:
-        joints.append(read(attributes.JOINTS_1))
-        weights.append(read(attributes.WEIGHTS_1))
-    joints = np.concatenate(joints, axis=1).astype(np.int64)
-    weights = np.concatenate(weights, axis=1).astype(np.float64)
-    faces = read(primitive.indices).reshape(-1, 3) if primitive.indices is not None else np.arange(len(vertices)).reshape(-1, 3)
-    faces = faces.astype(np.int64)
+    parts = []
+    for primitive in gltf.meshes[node.mesh].primitives or []:
+        if primitive.mode not in (None, 4):
+            continue  # points and lines are not a body
+        attributes = primitive.attributes
+        if attributes.JOINTS_0 is None or attributes.WEIGHTS_0 is None:
+            raise InputError("the mesh has no JOINTS_0/WEIGHTS_0", source=label)
+        points = read(attributes.POSITION).astype(np.float64)
+        joints = [read(attributes.JOINTS_0)]
+        weights = [read(attributes.WEIGHTS_0)]
+        if getattr(attributes, "JOINTS_1", None) is not None and getattr(attributes, "WEIGHTS_1", None) is not None:
+            joints.append(read(attributes.JOINTS_1))
+            weights.append(read(attributes.WEIGHTS_1))
+        faces = (read(primitive.indices).reshape(-1, 3) if primitive.indices is not None
+                 else np.arange(len(points) - len(points) % 3).reshape(-1, 3))
+        parts.append((points, np.concatenate(joints, axis=1).astype(np.int64),
+                      np.concatenate(weights, axis=1).astype(np.float64), faces.astype(np.int64)))
+    if not parts:
+        raise InputError("the skinned mesh has no triangles", source=label)
+    width = max(p[1].shape[1] for p in parts)
+    first = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
+    vertices = np.concatenate([p[0] for p in parts])
+    joints = np.concatenate([np.pad(p[1], ((0, 0), (0, width - p[1].shape[1]))) for p in parts])
+    weights = np.concatenate([np.pad(p[2], ((0, 0), (0, width - p[2].shape[1]))) for p in parts])
+    faces = np.concatenate([p[3] + at for p, at in zip(parts, first)])
 
     inverse = np.tile(np.eye(4), (len(own), 1, 1))
     if skin_def.inverseBindMatrices is not None:

@@ -273,11 +273,12 @@ def convert(
     from ..io.gltf_motion import is_gltf
 
     gltf_input = is_gltf(source)
-    if gltf_input and glb:  # a game character: its own mesh and weights are the skin, in its own metres
-        if skin is None and not config.glb.skin:
-            skin = Path(source)
-        if (units or config.glb.units) == "auto":
-            units = "m"
+    # A game character: its own mesh and weights are the skin, in its own metres. Neither is a
+    # choice the pipeline file records (reused on a BVH, it would bind that file's body and read
+    # centimetres as metres): the same input makes the same choice again.
+    own_body = gltf_input and glb and skin is None and not config.glb.skin
+    if own_body:
+        skin = Path(source)
     data, label = read_source(source, label)
     default = _default_name(source)
     if gltf_input and config.input.clip:  # one file, many clips: each its own outputs
@@ -309,7 +310,8 @@ def convert(
               if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
     recorded = None if to_stream else recorded_config(
         config, Path(output), glb=glb, units=character.units, influences=character.influences,
-        skin=character.skin_file, joint_map=character.map_file)
+        skin=None if own_body else character.skin_file, joint_map=character.map_file)
+    glb_units = "m" if gltf_input and character.units == "auto" else character.units
     changed = [] if recorded is None else _changed_since_recorded(config.glb, recorded.glb, character.skin_file,
                                                                   character.map_file)
     check_targets({**targets, **{f"old {p.suffix}": p for p in retired}}, inputs, overwrite)
@@ -325,7 +327,7 @@ def convert(
     if glb:
         from ..io.gltf import guessed_units_warning
 
-        unlikely = guessed_units_warning(character.units, motion.skeleton.height())
+        unlikely = guessed_units_warning(glb_units, motion.skeleton.height())
         warnings += [unlikely] if unlikely else []
     skin, binding = character.bound_to(motion, label) if glb else (None, None)  # a skin that will not bind costs nothing
     result = run(motion, config, paths=paths)
@@ -343,7 +345,7 @@ def convert(
         if glb:
             from .outputs import glb_files
 
-            building = pool.submit(_timed, glb_files, motion, result, skin, character.units, character.influences,
+            building = pool.submit(_timed, glb_files, motion, result, skin, glb_units, character.influences,
                                    None, usd)
         else:
             building = None

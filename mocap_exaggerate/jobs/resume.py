@@ -78,7 +78,8 @@ def kept_result(label: str, clip: Clip, out_dir: str | os.PathLike, started: flo
 
     folder = Path(out_dir) / clip.relative.parent
     listed = info.get("outputs") or {}
-    outputs = {kind: str(path) for kind, path in output_paths(folder, clip.name).items()
+    usd = Path(str(listed.get("usd", ""))).suffix.lstrip(".")
+    outputs = {kind: str(path) for kind, path in output_paths(folder, clip.name, usd=usd, fbx="fbx" in listed).items()
                if kind in listed or kind == "manifest"}
     stretch = (info.get("result") or {}).get("max_link_stretch")
     return FileResult(label, "skipped", outputs=outputs, frames=(info.get("result") or {}).get("frames"),

@@ -85,7 +85,10 @@ def clear_temporaries(clip: Clip, out_dir: str | os.PathLike, options: BatchOpti
     from .job import output_paths
 
     folder = Path(out_dir) / clip.relative.parent
-    targets = list(output_paths(folder, clip.name).values())
+    from ..config import USD_FORMATS
+
+    targets = list(output_paths(folder, clip.name, fbx=True).values())
+    targets += [folder / f"{clip.name}.{suffix}" for suffix in USD_FORMATS]  # whichever a run wrote
     if options.report:
         from ..viz.report import picture_paths
 
