@@ -179,7 +179,7 @@ def _read(path, fps: float | None, clip: str, label: str) -> tuple[Motion, GltfR
     # node's own transform is ignored, as glTF says), else the mesh node's world over the IBMs.
     bind = rest_world[order].copy()
     column = {node: k for k, node in enumerate(joints)}
-    (_, stood), *_ = _skinned_piece(gltf, read, nodes.index(owner), column, rest_world, label)
+    stood = _skinned_piece(gltf, read, nodes.index(owner), column, rest_world, label)[4]
     for node, k in column.items():
         bind[index[node]] = stood[k]
     # Nodes between the joints that the skin leaves out stand where their rest tree puts them under the bind.

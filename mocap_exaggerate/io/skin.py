@@ -192,9 +192,8 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
     world, parent = _world_matrices(gltf.nodes, label)
     column = {node: k for k, node in enumerate(joint_nodes)}
 
-    vertices, joints, weights, faces = _skinned_piece(gltf, read, owner_index, column, world, label)
-    bind_world = vertices.pop()  # the owner's: where its joints stand at bind
-    pieces = [(vertices[0], joints, weights, faces)]
+    vertices, joints, weights, faces, bind_world = _skinned_piece(gltf, read, owner_index, column, world, label)
+    pieces = [(vertices, joints, weights, faces)]  # bind_world: where the owner's joints stand at bind
     for number, node in enumerate(gltf.nodes):
         if number == owner_index or node.mesh is None:
             continue
@@ -202,8 +201,7 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
             other = gltf.skins[node.skin] if 0 <= node.skin < len(gltf.skins) else None
             if other is None or not set(other.joints or []) <= set(column):
                 continue
-            more, j, w, f = _skinned_piece(gltf, read, number, column, world, label)
-            pieces.append((more[0], j, w, f))
+            pieces.append(_skinned_piece(gltf, read, number, column, world, label)[:4])
             continue
         carrier = number  # a rigid piece: on the nearest joint at or above its node
         while carrier >= 0 and carrier not in column:
@@ -221,12 +219,7 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
             weight = np.zeros((len(points), joints.shape[1]))
             weight[:, 0] = 1.0
             pieces.append((moved, one, weight, triangles))
-    width = max(p[1].shape[1] for p in pieces)
-    start = np.cumsum([0] + [len(p[0]) for p in pieces[:-1]])
-    vertices = np.concatenate([p[0] for p in pieces])
-    joints = np.concatenate([np.pad(p[1], ((0, 0), (0, width - p[1].shape[1]))) for p in pieces])
-    weights = np.concatenate([np.pad(p[2], ((0, 0), (0, width - p[2].shape[1]))) for p in pieces])
-    faces = np.concatenate([p[3] + s for p, s in zip(pieces, start)])
+    vertices, joints, weights, faces = _joined(pieces)
     bind = {name: matrix[:3, 3].copy() for name, matrix in zip(names, bind_world)}
 
     joint_name = {}
@@ -245,6 +238,17 @@ def load_gltf_skin(path: str | os.PathLike) -> Skin:
     return Skin(vertices, np.ascontiguousarray(faces), names, top_j, top_w, bind, parents)
 
 
+def _joined(pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]):
+    """Pieces ``(vertices, joints, weights, faces)`` as one mesh: influences padded to the widest,
+    each piece's faces numbered after the vertices before it."""
+    width = max(p[1].shape[1] for p in pieces)
+    first = np.cumsum([0] + [len(p[0]) for p in pieces[:-1]])
+    return (np.concatenate([p[0] for p in pieces]),
+            np.concatenate([np.pad(p[1], ((0, 0), (0, width - p[1].shape[1]))) for p in pieces]),
+            np.concatenate([np.pad(p[2], ((0, 0), (0, width - p[2].shape[1]))) for p in pieces]),
+            np.concatenate([p[3] + at for p, at in zip(pieces, first)]))
+
+
 def _primitives(gltf, read, mesh: int) -> list[tuple[np.ndarray, np.ndarray]]:
     """Each triangle primitive of a mesh: its positions (V, 3) and faces (T, 3) (points and lines are not a body)."""
     out = []
@@ -260,7 +264,7 @@ def _primitives(gltf, read, mesh: int) -> list[tuple[np.ndarray, np.ndarray]]:
 
 def _skinned_piece(gltf, read, number: int, column: dict[int, int], world: np.ndarray, label: str):
     """A skinned mesh node's triangle primitives in the bind pose, in world space, its joints as
-    ``column`` numbers them: ``([vertices, bind_world], joints, weights, faces)``, ``bind_world``
+    ``column`` numbers them: ``(vertices, joints, weights, faces, bind_world)``, ``bind_world``
     (J, 4, 4) where its skin's joints stand at bind (identity rows for joints it does not use)."""
     node = gltf.nodes[number]
     skin_def = gltf.skins[node.skin]
@@ -286,12 +290,7 @@ def _skinned_piece(gltf, read, number: int, column: dict[int, int], world: np.nd
                       np.concatenate(weights, axis=1).astype(np.float64), faces.astype(np.int64)))
     if not parts:
         raise InputError("the skinned mesh has no triangles", source=label)
-    width = max(p[1].shape[1] for p in parts)
-    first = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
-    vertices = np.concatenate([p[0] for p in parts])
-    joints = np.concatenate([np.pad(p[1], ((0, 0), (0, width - p[1].shape[1]))) for p in parts])
-    weights = np.concatenate([np.pad(p[2], ((0, 0), (0, width - p[2].shape[1]))) for p in parts])
-    faces = np.concatenate([p[3] + at for p, at in zip(parts, first)])
+    vertices, joints, weights, faces = _joined(parts)
 
     inverse = np.tile(np.eye(4), (len(own), 1, 1))
     if skin_def.inverseBindMatrices is not None:
@@ -327,7 +326,7 @@ def _skinned_piece(gltf, read, number: int, column: dict[int, int], world: np.nd
     bind_world = np.tile(np.eye(4), (len(column), 1, 1))
     mapped = np.array([column[j] for j in own], dtype=np.int64)
     bind_world[mapped] = stood
-    return [vertices, bind_world], mapped[joints], weights, faces
+    return vertices, mapped[joints], weights, faces, bind_world
 
 
 def _unique_names(names: list[str]) -> tuple[str, ...]:

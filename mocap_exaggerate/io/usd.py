@@ -217,8 +217,3 @@ def _write_tracks(animation, motion: Motion, upright: np.ndarray, turn: np.ndarr
         rotations.Set(Vt.QuatfArray.FromNumpy(rotation[frame]), time)
         scaled.Set(Vt.Vec3hArray.FromNumpy(scales[frame]), time)
 
-
-def write_usd(path: str | os.PathLike, *args, **kwargs) -> None:
-    """`format_usd` written to ``path`` (its suffix chooses the format)."""
-    suffix = Path(path).suffix.lstrip(".").lower()
-    Path(path).write_bytes(format_usd(*args, suffix=suffix, **kwargs))
