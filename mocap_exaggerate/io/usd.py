@@ -27,7 +27,6 @@ in one line where it is missing.
 
 from __future__ import annotations
 
-import os
 import tempfile
 from pathlib import Path
 
@@ -216,4 +215,3 @@ def _write_tracks(animation, motion: Motion, upright: np.ndarray, turn: np.ndarr
         translations.Set(Vt.Vec3fArray.FromNumpy(translation[frame]), time)
         rotations.Set(Vt.QuatfArray.FromNumpy(rotation[frame]), time)
         scaled.Set(Vt.Vec3hArray.FromNumpy(scales[frame]), time)
-
