@@ -51,6 +51,12 @@ def test_an_eased_push_covers_every_frame_and_grows_and_fades():
     assert np.all(eased[18:22, 0] >= 1.0 - 1e-12)  # never short of a frame's own push
     assert eased[5, 0] == 0.0 and eased[35, 0] == 0.0  # and nothing far from it
     assert np.abs(np.diff(eased[:, 0])).max() < 0.35  # no step of the whole push in a frame
+    # Near the clip's ends the push fades, but never below a frame's own (a run's forearm six frames in
+    # stayed in the chest).
+    early = np.zeros((40, 3))
+    early[2:4, 1] = 1.0
+    assert np.all(eased_push(early, 6)[2:4, 1] >= 1.0 - 1e-12)
+    assert eased_push(early, 6)[0, 1] < 1.0
 
 
 @pytest.mark.parametrize("clip", ["assimp_boxing_toes.bvh", "cmu_14_19_laugh_idle_daz.bvh"])
@@ -62,7 +68,7 @@ def test_forearms_stay_out_of_the_body_where_the_capture_does(clip):
     quality = motion_quality(motion, result)
     pushed = result.constraints["body"]["pushed"]
     assert pushed.get("left_forearm", 0) + pushed.get("right_forearm", 0) > 20  # forearms went in and came out
-    assert quality["inside"] <= quality["inside_captured"] + 3, quality["inside"]  # (the boxer's shin: 3 frames)
+    assert quality["inside"] <= quality["inside_captured"], quality["inside"]  # (the boxer's shin: 3 frames before)
     off = motion_quality(motion, run(motion, replace(config, contacts=replace(config.contacts, collide=False))))
     assert off["inside"] > quality["inside"] + 20  # the pass is what keeps them out
 

@@ -27,7 +27,7 @@ from ..analysis.body import body_capsules, captured_sides, limb_parts, penetrati
 from ..analysis.limbs import behind_line
 from ..core.timing import end_ramp, gaussian_average, spread_max
 
-__all__ = ["Body", "prepare_body", "keep_out", "unbend_hinges", "eased_push", "move_middle", "EASE"]
+__all__ = ["Body", "prepare_body", "keep_out", "deeper_than_captured", "unbend_hinges", "eased_push", "move_middle", "EASE"]
 
 #: A push out of the body grows and fades over this many contact ramps (contacts.blend, 0.15 s): a hand
 #: swinging past the hips is in the pelvis for a few frames, and pushed out over so few it shook.
@@ -46,7 +46,9 @@ def eased_push(push: np.ndarray, ramp: int) -> np.ndarray:
     radius = max(1, int(ramp))
     # Nothing at the clip's first and last frames, where the exaggeration is nothing either (and kept
     # rest-pose frames meet the motion).
-    spread = spread_max(size, radius) * end_ramp(len(push), min(max(2.0, radius / 4), len(push) / 4))
+    # (never below a frame's own size, though: a run's part in the chest six frames in stayed there)
+    spread = np.maximum(spread_max(size, radius) * end_ramp(len(push), min(max(2.0, radius / 4), len(push) / 4)),
+                        size)
     direction = gaussian_average(push, radius / 3.0, ends="nearest", truncate=6.5)
     length = np.linalg.norm(direction, axis=-1, keepdims=True)
     return np.where(length > 0, spread[:, None] * direction / np.maximum(length, 1e-300), 0.0)
@@ -125,6 +127,7 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Bod
                 continue
             upper = np.linalg.norm(out[:, original[limb.joints[1]]] - out[:, original[limb.joints[0]]], axis=-1)
             lower = np.linalg.norm(out[:, original[limb.joints[2]]] - out[:, original[limb.joints[1]]], axis=-1)
+            toward_root = body.root - out[:, original[list(body.hips)]].mean(axis=1) if body.hips else None
             push = np.zeros((len(out), 3))
             bend = np.zeros((len(out), 3))  # the middle joint's, for a planted end that cannot move
             lift = np.zeros((len(out), 3))  # the body's, for a planted shin in the trunk (sat down onto it)
@@ -153,7 +156,7 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Bod
                 # Near its held end (a foot, or the shin's lower half in the trunk: sat down onto it) the knee
                 # cannot take it out: the body moves off it instead.
                 near_end = np.ones(len(out), bool) if part.a == part.b else trunk & (along > 0.5)
-                lift = _larger(lift, np.where(near_end[:, None], -out_of, 0.0))
+                lift = _larger(lift, np.where(near_end[:, None], _off(out_of, toward_root), 0.0))
             if not np.any(push):
                 continue
             held = pins.get(limb.end, nothing)
@@ -176,6 +179,28 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Bod
         if not moved:
             break
     return pushed
+
+
+def deeper_than_captured(positions: np.ndarray, body: Body) -> bool:
+    """Whether any part is inside the body in ``positions (F, J, 3)`` (original joints) at a frame where it
+    is deeper than the captured one (the frames `keep_out` would push)."""
+    found = penetrations(positions, body.capsules, body.parts, reference=body.sides)
+    return any(np.any((depth > 0) & (depth > body.captured_depth[name])) for name, (depth, *_) in found.items())
+
+
+def _off(out_of: np.ndarray, toward_root: np.ndarray | None) -> np.ndarray:
+    """(F, 3) the body's move off a part ``out_of (F, 3)`` of it: back toward where the capture has the root
+    (``toward_root``), as far as takes it off by ``|out_of|``, where that way takes it off at all (more than
+    half of it); else straight away from the part. (Straight away from a heel sat on, a boxer's pelvis
+    could not move without stretching his other, planted leg; up toward the captured crouch it could.)"""
+    if toward_root is None:
+        return -out_of
+    need = np.linalg.norm(out_of, axis=-1)
+    unit = np.divide(out_of, need[:, None], out=np.zeros_like(out_of), where=need[:, None] > 0)
+    off = -np.einsum("fc,fc->f", toward_root, unit)  # how far the way back takes the body off the part
+    scale = np.divide(need, off, out=np.zeros_like(need), where=off > 0)
+    return np.where(((off > 0.5 * need) & (need > 0))[:, None], toward_root * np.minimum(scale, 1.0)[:, None],
+                    -out_of)
 
 
 def _larger(now: np.ndarray, wanted: np.ndarray) -> np.ndarray:

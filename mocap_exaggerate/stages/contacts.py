@@ -46,7 +46,7 @@ from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
 from ..core.timing import check_duration, gaussian_average, parse_duration, parse_frame, smootherstep, spread_max
-from .collide import keep_out, prepare_body, unbend_hinges
+from .collide import deeper_than_captured, keep_out, prepare_body, unbend_hinges
 from .state import Pins
 from .subjoints import even_out
 
@@ -569,6 +569,10 @@ FOLDED = (0.2, 0.45)
 LIMB_HINGES = ("left_arm", "right_arm", "left_leg", "right_leg")
 #: A stretch's length missed by more than this share is said (a warning: stderr and the manifest).
 SHORTFALL = 0.01
+
+#: At most this many rounds of the body pass and the floor (`constrain`): each lift off the floor can put a
+#: part back in (a boxer's pelvis lifted off the canvas onto his heel), and the next round pushes it out.
+BODY_ROUNDS = 4
 #: Frames (a Gaussian's sigma) over which a two-bone chain's middle joint's move is eased in time.
 HINGE_EASE = 2.0
 
@@ -793,6 +797,17 @@ def constrain(
                 _move_end(out, hierarchy, effector, out[:, original[joint]] + lift[:, None] * up, rest,
                           pole_of(effector))
 
+    def lift_body() -> None:
+        """Lift every moving point off the floor (the feet held where they are planted)."""
+        margin = 0.005 * ground.height
+        moving = np.flatnonzero(~hierarchy.rigid[hierarchy.link_child])
+        heights = ground.heights(out[:, moving])
+        held = np.zeros(heights.shape)
+        for joint, weight in pins.items():
+            held[:, np.isin(hierarchy.link_child[moving], effectors[joint].chain[-1:])] = weight[:, None]
+        lift = _spread_lift(soft_floor(heights, ground.floor, margin) - heights, ramp, held)
+        out[:, moving, ground.axis] = ground.sign * (heights + lift)
+
     body: dict[str, dict[str, int]] = {}
     floor = config.enabled and config.floor
     if config.enabled and config.collide:
@@ -815,7 +830,10 @@ def constrain(
             return sub_chain(hierarchy, chain)
 
         body["unbent"], body["pushed"] = {}, {}
-        for _ in range(2 if floor else 1):
+        # The floor's lifts can put a part back in (a boxer's pelvis exaggerated under the canvas and lifted
+        # onto his heel): rounds until none is deeper than the capture's (or BODY_ROUNDS; at least two with a
+        # floor, one without).
+        for round_ in range(BODY_ROUNDS if floor else 1):
             unbent = unbend_hinges(out, hierarchy, limbs, hinges, chain_of)
             pushed = keep_out(out, hierarchy, limbs, effectors, shape, ramp, pins, move, chain_of,
                               asked=asked) if shape is not None else {}
@@ -824,19 +842,14 @@ def constrain(
                     body[kind][name] = max(body[kind].get(name, 0), count)
             if floor:
                 lift_ends()
-        unbend_hinges(out, hierarchy, limbs, hinges, chain_of)  # what the floor's lifts bent back
+            unbend_hinges(out, hierarchy, limbs, hinges, chain_of)  # what the floor's lifts bent back
+            if floor:
+                lift_body()
+            if round_ >= 1 and (shape is None or not deeper_than_captured(out[:, original], shape)):
+                break
     elif floor:
         lift_ends()
-
-    if floor:
-        margin = 0.005 * ground.height
-        moving = np.flatnonzero(~hierarchy.rigid[hierarchy.link_child])
-        heights = ground.heights(out[:, moving])
-        held = np.zeros(heights.shape)
-        for joint, weight in pins.items():
-            held[:, np.isin(hierarchy.link_child[moving], effectors[joint].chain[-1:])] = weight[:, None]
-        lift = _spread_lift(soft_floor(heights, ground.floor, margin) - heights, ramp, held)
-        out[:, moving, ground.axis] = ground.sign * (heights + lift)
+        lift_body()
 
     held = []
     for key in keys:
