@@ -20,11 +20,13 @@ SHARED_CLIPS = sorted(SHARED_BVH.glob("*.bvh")) if SHARED_BVH.is_dir() else []
 SHARED_REASON = f"real-data clips not found at {SHARED_BVH} (CI has ../shared beside the checkout)"
 
 
-def shared_clip_params():
-    """Parametrize over every shared clip, or one skipped case that says why."""
+def shared_clip_params(wide: bool = False):
+    """Parametrize over every shared clip (and, with ``wide``, the wider corpus in ``wide/``), or one
+    skipped case that says why."""
     if not SHARED_CLIPS:
         return [pytest.param(None, marks=pytest.mark.skip(reason=SHARED_REASON), id="no-shared-data")]
-    return [pytest.param(p, id=p.stem) for p in SHARED_CLIPS]
+    more = sorted((SHARED_BVH / "wide").glob("*.bvh")) if wide else []
+    return [pytest.param(p, id=p.stem) for p in SHARED_CLIPS] + [pytest.param(p, id=f"wide-{p.stem}") for p in more]
 
 
 def all_clip_params():

@@ -239,14 +239,14 @@ def test_a_planted_foot_stays_where_it_was_captured_and_the_leg_keeps_its_bones(
     assert np.abs(free.world_positions[inside, ankle] - captured[inside, ankle]).max() > 0.05
     np.testing.assert_allclose(pinned.world_positions[inside, ankle], captured[inside, ankle], atol=1e-9)
     # Two-bone IK keeps the (exaggerated) bone lengths, but for what easing the knee's move in time and
-    # the soft solve near full reach take (3.3 % and 0.9 % here; exact without them).
+    # the soft solve near full reach take (4.0 % and 0.9 % here, the knee eased over 2.5 frames; exact without them).
     for upper, lower in ((thigh, knee), (knee, ankle)):
         np.testing.assert_allclose(
             np.linalg.norm(pinned.world_positions[inside, lower] - pinned.world_positions[inside, upper], axis=-1),
             np.linalg.norm(free.world_positions[inside, lower] - free.world_positions[inside, upper], axis=-1),
-            rtol=0.035)
+            rtol=0.045)
     # Far from the contact, nothing changed (but for the last millionth of the knee's move, eased in time).
-    late = slice(runs[0][1] + 20, None)
+    late = slice(runs[0][1] + 25, None)
     np.testing.assert_allclose(pinned.world_positions[late], free.world_positions[late], atol=1e-6 * 4.0)
 
 

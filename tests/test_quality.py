@@ -120,24 +120,17 @@ def test_knees_bend_toward_the_toes_as_captured(path):
     assert backwards <= 60, backwards  # measured 41 of 1988 leg-frames
 
 
-#: Known exceptions, measured: the boxer getting up off the canvas at looney, where the body pass lifts
-#: the hips off the folded shins of planted feet (2.31x; 1.95x without it, and 63 frames of shins in the pelvis).
-KNEES_WITHOUT_SUBJOINTS = {("assimp_boxing_toes.bvh", "looney"): 2.35}
-
-
 @pytest.mark.parametrize("preset", ["subtle", "cartoon", "looney"])
-@pytest.mark.parametrize("path", shared_clip_params())
+@pytest.mark.parametrize("path", shared_clip_params(wide=True))
 def test_no_knee_pops_without_subjoints(path, preset):
     """Issue 25: the two-bone solve of a planted foot moved a knee 3.9-13.6x its largest captured
-    one-frame step (the boxer at looney) as the leg passed straight or folded shut. Every joint
-    now stays within 2x, or within 5 % of what the exaggeration gives it before the feet are held
-    (the sit-down clip at looney: 1.99x before, 2.09x after)."""
+    one-frame step (the boxer at looney) as the leg passed straight or folded shut. Every joint now
+    stays within 2x on every shared clip, the wider corpus too. The last two: the boxer's kneel at
+    looney (2.004x, the knee's move eased over 2 frames) and the sit-down's knee at looney (2.09x,
+    the correction letting go of a thigh within 3 frames at 30 fps)."""
     motion, _ = read_bvh(path, fps=120.0 if "amc2bvh" in path.name else None)
     config = load_preset(preset)
     config = replace(config, subjoints=replace(config.subjoints, enabled=False))
     jumps = motion_quality(motion, run(motion, config))
-    if jumps["jump_ratio"] <= KNEES_WITHOUT_SUBJOINTS.get((path.name, preset), 2.0):
-        return
-    free = motion_quality(motion, run(motion, replace(config, contacts=replace(config.contacts, enabled=False))))
-    assert jumps["jump_ratio"] <= 1.05 * free["jump_ratio"], (path.name, preset, jumps["jump_joint"],
-                                                               jumps["jump_frame"], jumps["jump_ratio"])
+    assert jumps["jump_ratio"] <= 2.0, (path.name, preset, jumps["jump_joint"], jumps["jump_frame"],
+                                        jumps["jump_ratio"])

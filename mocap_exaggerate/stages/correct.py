@@ -25,7 +25,7 @@ smooth in time, keeping the guarantees:
 
 1. per frame, the share of excess the iteration removes, ``c = 1 - (1 - delta)^k``
    (0 under threshold);
-2. spread over time by a running maximum over ``smooth`` either side, then
+2. spread over time by a running maximum over ``smooth`` either side (at least 4 frames), then
    a Gaussian truncated at that radius: never less than (1), so every frame
    still ends at or under the threshold, and exactly 0 more than two radii
    from any frame over it (those frames are untouched);
@@ -52,6 +52,10 @@ if TYPE_CHECKING:
 
 __all__ = ["CorrectConfig", "CorrectReport", "accent_stretch", "correct", "correct_stage", "max_link_stretch",
            "stretch_error"]
+
+#: The correction's spread in time is never narrower than this many frames either side: at 30 fps its 0.1 s
+#: is 3 frames, and a thigh let go over them moved the knee 2.09x its largest captured step (issue 25).
+_FEWEST_FRAMES = 4
 
 #: A threshold of 0 is reached only in the limit for delta < 1; stop this close to it.
 _TOLERANCE = 1e-9
@@ -251,7 +255,7 @@ def correct(
     share = np.zeros(len(errors))
     share[active] = 1.0 - (1.0 - delta) ** steps  # share of each excess removed
     if smooth > 0:
-        share = np.clip(spread_max(share, int(round(smooth))), 0.0, 1.0)
+        share = np.clip(spread_max(share, max(int(round(smooth)), _FEWEST_FRAMES)), 0.0, 1.0)
     touched = np.union1d(np.flatnonzero(share > 0), held)
     link_share = np.repeat(share[touched, None], len(parents) - 1, axis=1)
     link_share[:, hard_links] = 1.0
