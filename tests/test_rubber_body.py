@@ -169,5 +169,7 @@ def test_a_stretched_limb_is_thinner_in_the_preview_as_in_the_glb():
     # With output.preserve_volume off the run says so, and the preview poses the plain body.
     kept = run(motion, replace(_looney_stretched(), output=replace(_looney_stretched().output, preserve_volume=False)))
     assert output_thickness(kept) is None
-    np.testing.assert_array_equal(pose_bodies(motion, kept, [frame]).exaggerated[0],
-                                  pose_skin(skin, rest, kept.world_rotations[frame], kept.world_positions[frame], index))
+    # (the preview blends matrices, `pose_skin` turns offsets: the same sum to the last bits)
+    np.testing.assert_allclose(pose_bodies(motion, kept, [frame]).exaggerated[0],
+                               pose_skin(skin, rest, kept.world_rotations[frame], kept.world_positions[frame], index),
+                               rtol=0, atol=1e-9 * motion.skeleton.height())

@@ -24,7 +24,8 @@ from ..core.motion import Motion
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin
 from .framing import camera_centres, preview_window, view_limits
-from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, pose_bodies, shaded_triangles
+from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, pose_bodies
+from .raster import BATCH, Canvas, draw_body, in_order, write
 
 __all__ = ["animation_frames", "render_frames", "render_gif", "render_mp4", "gif_durations", "MAX_FPS",
            "MAX_SECONDS", "NO_FFMPEG"]
@@ -34,7 +35,6 @@ log = logging.getLogger(__name__)
 MAX_FPS = 20.0  # an animation shows every step-th frame, the smallest step at or under this rate
 MAX_SECONDS = 10.0  # an animation's default length: a long clip is cut here (``seconds`` shows more)
 NO_FFMPEG = "writing .mp4 needs ffmpeg on PATH, which was not found; .gif previews work without it"
-_TRIANGLE_CODES = np.array([1, 2, 2, 79], dtype=np.uint8)  # a matplotlib Path's MOVETO, LINETO, LINETO, CLOSEPOLY
 
 
 def animation_frames(motion: Motion, result: PipelineResult, *, start: float = 0.0, seconds: float | None = None,
@@ -65,16 +65,11 @@ def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
     (as H.264 wants) and the same for every picture.
     The view covers every vertex of both bodies in every frame (`view_limits`). The camera
     follows the captured root across when it travels (`camera_centres`); ticks on the ground
-    then scroll by with the travel. Both bodies are posed and shaded for many frames at once;
-    the loop draws.
+    then scroll by with the travel. Both bodies are posed, shaded and drawn (`mocap_exaggerate.viz.raster`)
+    for a batch of frames at once.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.collections import LineCollection, PathCollection
-    from matplotlib.figure import Figure
-    from matplotlib.path import Path as Path2D
-
     frames = np.asarray(frames, dtype=np.int64)
-    bodies = pose_bodies(motion, result, frames, skin)
+    bodies = pose_bodies(motion, result, frames, skin, dtype=np.float32)
     right, up, _ = bodies.axes
     points = bodies.screen_points()
     tall = motion.skeleton.height()
@@ -84,52 +79,48 @@ def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
     panel_h = max(int(height), 16)
     panel_w = math.ceil(panel_h * 2.0 * half / (high - low))
     half = 0.5 * panel_w / panel_h * (high - low)  # the panel's own scale: at least the fitted half width
+    scale = panel_h / (high - low)
     top, bottom, gap = 22, 18, 10
     gap += (2 * panel_w + gap) % 2
     bottom += (panel_h + top + bottom) % 2
     width_px, height_px = 2 * panel_w + gap, panel_h + top + bottom
-    figure = Figure(figsize=(width_px / 100, height_px / 100), dpi=100, facecolor="white")
-    canvas = FigureCanvasAgg(figure)
     # The ground: the lowest the captured body goes (the exaggerated one may go through it).
     floor = float(bodies.captured[..., up].min() if bodies.captured.shape[1] else bodies.root[:, up].min())
+    floor_row = min(max(int(round(top + (high - floor) * scale)), 0), height_px - 1)
+    tick_rows = max(int(round(0.025 * panel_h)), 1)
     spacing = (tall if tall > 0 else high - low) / 4.0
-    ticks = np.arange(math.floor((centre.min() - half) / spacing), math.ceil((centre.max() + half) / spacing) + 1)
-    tick = 0.025 * (high - low)
-    panels = []
-    for number, (vertices, faces, color, title, ink) in enumerate((
-            (bodies.captured, bodies.captured_faces, CAPTURED_COLOR, "captured", (0.35, 0.35, 0.38)),
-            (bodies.exaggerated, bodies.exaggerated_faces, EXAGGERATED_COLOR, "exaggerated", (0.8, 0.42, 0.08)))):
-        left = number * (panel_w + gap)
-        ax = figure.add_axes((left / width_px, bottom / height_px, panel_w / width_px, panel_h / height_px))
-        ax.set_ylim(low, high)
-        ax.axis("off")
-        ax.axhline(floor, color=(0.8, 0.8, 0.82), linewidth=1.0, zorder=1)
-        ax.add_collection(LineCollection([[(x * spacing, floor), (x * spacing, floor - tick)] for x in ticks],
-                                         colors=[(0.8, 0.8, 0.82)], linewidths=1.0, zorder=1))
-        # One Path per triangle, made once, each a view into ``corners``: a frame is drawn by
-        # writing its sorted triangles into ``corners`` (set_verts would build thousands of Paths).
-        corners = np.zeros((len(faces), 4, 2))
-        polygons = PathCollection([Path2D(c, _TRIANGLE_CODES) for c in corners], edgecolors="none", zorder=2)
-        ax.add_collection(polygons)
-        figure.text((left + panel_w / 2) / width_px, 1 - 4 / height_px, title, ha="center", va="top", fontsize=9,
-                    color=ink)
-        panels.append((ax, polygons, corners, vertices, faces, color))
-    label = figure.text(0.5, 3 / height_px, "", ha="center", va="bottom", fontsize=8, color=(0.3, 0.3, 0.3))
+    panels = ((bodies.captured, bodies.captured_faces, CAPTURED_COLOR, bodies.captured_facing, "captured", (89, 89, 97)),
+              (bodies.exaggerated, bodies.exaggerated_faces, EXAGGERATED_COLOR, bodies.exaggerated_facing, "exaggerated",
+               (204, 107, 20)))
     first = result.first
-    chunk = 32
-    for begin in range(0, len(frames), chunk):
-        shaded = [shaded_triangles(vertices[begin:begin + chunk], faces, bodies.axes, color)
-                  for *_, vertices, faces, color in panels]
-        for offset in range(len(shaded[0][0])):
-            k = begin + offset
-            for (ax, polygons, corners, *_), (triangles, colors) in zip(panels, shaded):
-                corners[:, :3] = triangles[offset]
-                corners[:, 3] = triangles[offset, :, 0]
-                polygons.set_facecolor(colors[offset])  # marks the collection for redrawing
-                ax.set_xlim(centre[k] - half, centre[k] + half)
-            label.set_text(f"frame {frames[k]}   {(frames[k] - first) * motion.frame_time:.2f} s")
-            canvas.draw()
-            yield np.asarray(canvas.buffer_rgba())[:height_px, :width_px, :3].copy()
+
+    def draw(begin: int) -> list[np.ndarray]:
+        count = min(BATCH, len(frames) - begin)
+        chunk = slice(begin, begin + count)
+        canvas = Canvas(count, height_px, width_px)
+        ground = canvas.colour((0.8, 0.8, 0.82))
+        for number, (vertices, faces, colour, facing, *_) in enumerate(panels):
+            left = number * (panel_w + gap)
+            canvas.fill(slice(None), slice(floor_row, floor_row + 1), slice(left, left + panel_w), ground)
+            for k in range(count):
+                view = centre[begin + k] - half
+                for x in np.arange(math.floor(view / spacing), math.ceil((view + 2 * half) / spacing) + 1):
+                    column = int(round(left + (x * spacing - view) * scale))
+                    if left <= column < left + panel_w:
+                        canvas.fill(k, slice(floor_row, floor_row + tick_rows + 1), slice(column, column + 1), ground)
+            draw_body(canvas, np.arange(count), vertices[chunk], faces, bodies.axes, colour,
+                      left, top, scale, centre[chunk] - half, high, facing)
+        pictures = []
+        for k, picture in enumerate(canvas.pictures()):
+            frame = frames[begin + k]
+            texts = [(number * (panel_w + gap) + panel_w / 2, 4, title, 12, ink, "mt")
+                     for number, (*_, title, ink) in enumerate(panels)]
+            texts.append((width_px / 2, height_px - 3, f"frame {frame}   {(frame - first) * motion.frame_time:.2f} s",
+                          11, (77, 77, 77), "mb"))
+            pictures.append(write(picture, texts))
+        return pictures
+
+    yield from in_order(draw, range(0, len(frames), BATCH))
 
 
 def _gif_palette() -> np.ndarray:

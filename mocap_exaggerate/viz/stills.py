@@ -1,7 +1,8 @@
 """Still pictures as PNG bytes: the captured and exaggerated body at a few frames (`render_preview`)
 and one joint's path captured, averaged and exaggerated (`render_trajectory`).
 
-Drawn with matplotlib (Agg): no GPU, no display, the same bytes every time.
+The bodies are drawn by `mocap_exaggerate.viz.raster` (NumPy), the paths with matplotlib (Agg): no
+GPU, no display, the same bytes every time.
 """
 
 from __future__ import annotations
@@ -14,9 +15,10 @@ from ..core.motion import Motion
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin
 from .framing import fastest_end, lined_up, view_limits
-from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, pose_bodies, shaded_triangles
+from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, pose_bodies
+from .raster import Canvas, draw_body, write
 
-__all__ = ["render_preview", "render_trajectory"]
+__all__ = ["render_preview", "render_trajectory", "png_bytes"]
 
 
 def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, width: float = 2.4,
@@ -24,38 +26,42 @@ def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, w
     """A PNG: the captured (top, grey) and exaggerated (bottom, orange) body at a few frames.
 
     ``at``: the output frames to draw (e.g. `telling_frames`); default ``frames`` evenly spaced.
-    ``width``: inches per column. Every column is centred on the captured root and all panels
-    share one scale and one height range, taller where a stretch reaches higher (`view_limits`).
+    ``width``: inches per column (at ``dpi``). Every column is centred on the captured root and all
+    panels share one scale and one height range, taller where a stretch reaches higher (`view_limits`).
+    Drawn by `mocap_exaggerate.viz.raster`.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.collections import PolyCollection
-
     first = result.first
     last = result.world_positions.shape[0] - 1
     picks = np.unique(np.linspace(first, last, frames).astype(int) if at is None else np.clip(at, 0, last))
-    bodies = pose_bodies(motion, result, picks, skin)
+    bodies = pose_bodies(motion, result, picks, skin, dtype=np.float32)
     right = bodies.axes[0]
     half, low, high = view_limits(bodies.screen_points(), bodies.root[:, right])
-    row_height = width * (high - low) / (2.0 * half)
-    figure, axes = plt.subplots(2, len(picks), figsize=(width * len(picks), 2 * row_height + 0.5), squeeze=False)
-    for row, (vertices, faces, color) in enumerate(((bodies.captured, bodies.captured_faces, CAPTURED_COLOR),
-                                                    (bodies.exaggerated, bodies.exaggerated_faces, EXAGGERATED_COLOR))):
-        polygons, colors = shaded_triangles(vertices, faces, bodies.axes, color)
-        for column, frame in enumerate(picks):
-            ax = axes[row, column]
-            ax.add_collection(PolyCollection(polygons[column], facecolors=colors[column], edgecolors="none"))
-            centre = bodies.root[column, right]
-            ax.set_xlim(centre - half, centre + half)
-            ax.set_ylim(low, high)
-            ax.set_aspect("equal")
-            ax.axis("off")
-            if row == 0:
-                ax.set_title(f"frame {frame}", fontsize=9)
-    figure.suptitle("captured (top) and exaggerated (bottom)", fontsize=10)
-    return _png(figure, dpi)
+    column = max(int(round(width * dpi)), 16)
+    scale = column / (2.0 * half)
+    row = max(int(round((high - low) * scale)), 16)
+    top, title_row, margin = 26, 16, 6
+    width_px = len(picks) * column + 2 * margin
+    height_px = top + title_row + 2 * row + margin
+    canvas = Canvas(1, height_px, width_px)
+    everything = np.zeros(len(picks), dtype=np.int64)
+    lefts = margin + column * np.arange(len(picks), dtype=np.float64)
+    for number, (vertices, faces, colour, facing) in enumerate((
+            (bodies.captured, bodies.captured_faces, CAPTURED_COLOR, bodies.captured_facing),
+            (bodies.exaggerated, bodies.exaggerated_faces, EXAGGERATED_COLOR, bodies.exaggerated_facing))):
+        draw_body(canvas, everything, vertices, faces, bodies.axes, colour, lefts, top + title_row + number * row,
+                  scale, bodies.root[:, right] - half, high, facing)
+    texts = [(width_px / 2, 4, "captured (top) and exaggerated (bottom)", 13, (30, 30, 30), "mt")]
+    texts += [(left + column / 2, top, f"frame {frame}", 11, (30, 30, 30), "mt") for left, frame in zip(lefts, picks)]
+    return png_bytes(write(canvas.pictures()[0], texts))
+
+
+def png_bytes(picture: np.ndarray) -> bytes:
+    """``picture (H, W, 3) uint8`` as PNG bytes (nothing but the pixels: the same bytes every time)."""
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(picture).save(buffer, format="PNG", optimize=False)
+    return buffer.getvalue()
 
 
 def render_trajectory(motion: Motion, result: PipelineResult, joint: int | str | None = None,
