@@ -26,7 +26,8 @@ kept rest frames included, so a pop where the rest pose ends shows):
 ``bench/quality.py`` prints them for every shared clip and preset; the tests hold the
 presets to them.
 
-`face_stretch` measures a skinned mesh instead: how far its faces stretch when posed.
+`face_stretch` measures a skinned mesh instead: how far its faces stretch when posed. `summary` is the
+three figures a compare grid labels each cell with, cheaply.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from ..core.rotations import quat_angle
 from .body import inside_body
 from .limbs import behind_line, find_limbs, hinge_pole
 
-__all__ = ["motion_quality", "turn_degrees", "still_frames", "STRETCHED"]
+__all__ = ["motion_quality", "summary", "turn_degrees", "still_frames", "STRETCHED"]
 
 #: A limb longer than this many times its rest length counts as stretched.
 STRETCHED = 1.5
@@ -170,3 +171,33 @@ def face_stretch(skin, bind: np.ndarray, rotations: np.ndarray, positions: np.nd
         ratio = np.linalg.norm(np.diff(posed[edges], axis=1)[:, 0], axis=1) / rest
         worst = np.maximum(worst, ratio.reshape(3, -1).max(axis=0))
     return worst
+
+
+def summary(motion: Motion, result) -> dict[str, float | None]:
+    """Three figures of a run, for a label (``compare``): ``stretch``, the longest any arm or leg gets over
+    its rest length (through its sub-joints); ``jerk``, the jerk p99 ratio of `motion_quality`; ``limit``,
+    the share of the exaggeration the speed limit took (None without a limit)."""
+    if result.rest_frames_dropped:
+        motion = motion.slice(slice(result.rest_frames, None))
+    skeleton = motion.skeleton
+    cap = motion.world_positions()
+    out_all = result.world_positions
+    out = out_all[:, result.original_index]
+    jerk = np.linalg.norm(np.diff(out, 3, axis=0), axis=-1) if len(out) > 3 else None
+    cap_jerk = np.linalg.norm(np.diff(cap, 3, axis=0), axis=-1) if len(cap) > 3 else None
+    ratio = (float(np.percentile(jerk, 99) / max(np.percentile(cap_jerk, 99), 1e-12))
+             if jerk is not None and cap_jerk is not None else 1.0)
+    rest = skeleton.link_lengths()
+    out_skeleton = result.motion.skeleton
+    longest = 1.0
+    for name, limb in find_limbs(skeleton).items():
+        if not name.endswith(("_arm", "_leg")):
+            continue
+        rest_length = sum(rest[j] for j in _path(skeleton, limb.base, limb.end))
+        if rest_length <= 0:
+            continue
+        chain = _path(out_skeleton, int(result.original_index[limb.base]), int(result.original_index[limb.end]))
+        length = np.linalg.norm(out_all[:, chain] - out_all[:, out_skeleton.parents[chain]], axis=-1).sum(axis=1)
+        longest = max(longest, float(length.max() / rest_length))
+    report = result.speed_report
+    return {"stretch": longest, "jerk": ratio, "limit": None if report is None else float(report.taken)}

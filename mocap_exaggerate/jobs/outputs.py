@@ -19,7 +19,8 @@ from ..io.bvh import written_positions
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin, top_influences
 
-__all__ = ["manifest", "output_thickness", "base_skin", "output_skin", "make_glb", "glb_files", "CharacterFiles"]
+__all__ = ["manifest", "output_thickness", "base_skin", "output_skin", "make_glb", "glb_files", "captured_glb",
+           "CharacterFiles"]
 
 
 def manifest(
@@ -218,3 +219,18 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
 
         scene = format_usd(result.motion, bound, suffix=usd, meters_per_unit=scale, thickness=thickness, up=up)
     return CharacterFiles(glb, weights, how, scene)
+
+
+def captured_glb(motion: Motion, result: PipelineResult, skin: Skin | None = None, units: str = "auto") -> bytes:
+    """A GLB of the captured clip with the run's body (``skin`` bound to the clip, else the default body),
+    frame for frame with the run's output (its rest frames dropped where the run dropped them), in the
+    units and standing as the run's GLB (`glb_files`): the reference a page plays beside the exaggerated one."""
+    from ..analysis.limbs import standing_up
+    from ..io.gltf import glb_pieces, unit_scale
+
+    scale, _ = unit_scale(units, motion.skeleton.height())
+    step = max(motion.num_frames // 64, 1)
+    up = standing_up(motion.skeleton, motion.slice(slice(None, None, step)).world_positions())
+    shown = motion.slice(slice(result.rest_frames, None)) if result.rest_frames_dropped else motion
+    return b"".join(glb_pieces(shown, base_skin(motion, result, skin), meters_per_unit=scale, up=up,
+                               name="captured"))

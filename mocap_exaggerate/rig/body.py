@@ -60,7 +60,7 @@ TORSO_RADIUS = 0.06
 HEAD_RADIUS = 0.05
 
 
-def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
+def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None, detail: float = 1.0) -> Skin:
     """A rubber body of tubes around ``skeleton``'s rest pose (see the module's notes).
 
     skeleton : any skeleton; humanoids (`mocap_exaggerate.analysis.limbs.find_limbs`) get a thicker
@@ -68,6 +68,8 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     rigid : (J,) bool, joints (fingers, toes, face, twist bones) that get no piece of
         their own but ride on their nearest non-rigid ancestor's; default
         `mocap_exaggerate.analysis.branches.minor_branches`, as the pipeline prunes them
+    detail : below 1, a coarser body (fewer vertices around and along each tube): a compare grid's
+        small cells draw ten bodies a picture
 
     Returns a `Skin` made of closed, outward-facing tubes, one per run of links, in the rest
     pose; a vertex has one influence, or two near a joint where a tube bends (padded to four
@@ -147,7 +149,7 @@ def default_skin(skeleton: Skeleton, rigid: np.ndarray | None = None) -> Skin:
     # drawn as one tube; beyond DETAILED tubes (a root with hundreds of children: not a
     # character) they are tessellated coarser, so the body stays bounded in size.
     chains = _chains(mover, start, end, child, short)
-    detail = min(1.0, np.sqrt(DETAILED / max(len(chains), 1)))
+    detail = min(1.0, np.sqrt(DETAILED / max(len(chains), 1))) * min(max(float(detail), 0.1), 1.0)
     around = max(6, int(_AROUND * detail))
     rings = max(2, int(_RINGS * detail))
     steps = _STEPS if detail == 1.0 else 1  # a coarse body: no rings between a piece's ends

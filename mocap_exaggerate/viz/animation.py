@@ -14,7 +14,7 @@ import math
 import shutil
 import subprocess
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +27,8 @@ from .framing import camera_centres, preview_window, view_limits
 from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, pose_bodies
 from .raster import BATCH, Canvas, draw_body, in_order, write
 
-__all__ = ["animation_frames", "render_frames", "render_gif", "render_mp4", "gif_durations", "MAX_FPS",
+__all__ = ["animation_frames", "render_frames", "render_gif", "render_mp4", "encode_gif", "encode_mp4", "gif_durations",
+           "MAX_FPS",
            "MAX_SECONDS", "NO_FFMPEG"]
 
 log = logging.getLogger(__name__)
@@ -174,12 +175,17 @@ def render_gif(motion: Motion, result: PipelineResult, *, start: float = 0.0, se
     `animation_frames`, pictures from `render_frames`. The same bytes every time."""
     check_number("max_fps", max_fps, 0.0, 50.0, low_open=True)
     frames, frame_seconds = animation_frames(motion, result, start=start, seconds=seconds, max_fps=max_fps)
+    return encode_gif(render_frames(motion, result, frames, height=height, skin=skin), frame_seconds)
+
+
+def encode_gif(pictures: Iterable[np.ndarray], frame_seconds: float) -> bytes:
+    """RGB ``pictures`` as a looping GIF, each shown ``frame_seconds``, on one fixed palette (`_gif_palette`)."""
     palette = _gif_palette()
     lookup = np.full(1 << 24, -1, dtype=np.int16)
-    pictures = [_indexed(rgb, palette, lookup) for rgb in render_frames(motion, result, frames, height=height, skin=skin)]
+    indexed = [_indexed(rgb, palette, lookup) for rgb in pictures]
     buffer = io.BytesIO()
-    pictures[0].save(buffer, format="GIF", save_all=True, append_images=pictures[1:], loop=0,
-                     duration=gif_durations(len(pictures), frame_seconds))
+    indexed[0].save(buffer, format="GIF", save_all=True, append_images=indexed[1:], loop=0,
+                    duration=gif_durations(len(indexed), frame_seconds))
     return buffer.getvalue()
 
 
@@ -189,11 +195,21 @@ def render_mp4(motion: Motion, result: PipelineResult, *, start: float = 0.0, se
 
     ConfigError when ffmpeg is not on PATH; OSError with ffmpeg's message when it fails.
     """
+    if shutil.which("ffmpeg") is None:
+        raise ConfigError(NO_FFMPEG)
+    frames, frame_seconds = animation_frames(motion, result, start=start, seconds=seconds, max_fps=max_fps)
+    return encode_mp4(render_frames(motion, result, frames, height=height, skin=skin), frame_seconds)
+
+
+def encode_mp4(pictures: Iterator[np.ndarray], frame_seconds: float) -> bytes:
+    """RGB ``pictures`` (all of one size, even) as an H.264 MP4 by ffmpeg, each shown ``frame_seconds``.
+
+    ConfigError when ffmpeg is not on PATH; OSError with ffmpeg's message when it fails.
+    """
     ffmpeg = shutil.which("ffmpeg")
     if ffmpeg is None:
         raise ConfigError(NO_FFMPEG)
-    frames, frame_seconds = animation_frames(motion, result, start=start, seconds=seconds, max_fps=max_fps)
-    pictures = render_frames(motion, result, frames, height=height, skin=skin)
+    pictures = iter(pictures)
     picture = next(pictures)
     with tempfile.TemporaryDirectory(prefix="mocap-preview-") as folder:
         target, messages = Path(folder) / "preview.mp4", Path(folder) / "ffmpeg.log"

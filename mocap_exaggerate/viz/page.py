@@ -30,7 +30,7 @@ import re
 from dataclasses import dataclass, field
 from importlib.resources import files
 
-__all__ = ["PageFigure", "page_html"]
+__all__ = ["PageFigure", "page_html", "page_ends", "page_sigma", "run_page"]
 
 #: What the page's <meta name="generator"> says.
 GENERATOR = "mocap_exaggerate page"
@@ -125,3 +125,34 @@ def page_html(figures: list[PageFigure], *, title: str, fps: float, ends: list[s
     fills = {"title": html.escape(str(title)), "data": _script_json(data), "viewer": _web_file("viewer.js")}
     # One pass over the template: what is filled in is never searched for placeholders again.
     return re.sub(r"\{\{(\w+)\}\}", lambda match: fills[match.group(1)], _web_file("page.html"))
+
+
+def page_ends(motion) -> list[str]:
+    """The joints whose paths a page draws: the ends of the arms and legs found (hands and feet), else the
+    fastest end effector (`mocap_exaggerate.viz.framing.fastest_end`)."""
+    from ..analysis.limbs import find_limbs
+    from .framing import fastest_end
+
+    limbs = find_limbs(motion.skeleton)
+    ends = [motion.skeleton.names[limbs[name].end] for name in ("left_arm", "right_arm", "left_leg", "right_leg")
+            if name in limbs]
+    return ends or [motion.skeleton.names[fastest_end(motion)]]
+
+
+def page_sigma(motion, config) -> float:
+    """The extrapolation's sigma in frames, for the captured paths' average (0 with extrapolation off)."""
+    if config is None or not config.extrapolate.enabled:
+        return 0.0
+    return float(config.extrapolate.sigma_frames(motion.frame_time, max(motion.num_frames, 1)))
+
+
+def run_page(motion, result, config, *, label: str, skin=None, title: str, tune: dict | None = None,
+             units: str = "auto") -> str:
+    """The page of one run: the captured motion and ``result`` (labelled ``label``, with its figures)."""
+    from ..jobs.outputs import captured_glb, make_glb
+    from .compare import cell_figures
+
+    figures = [PageFigure("captured", captured_glb(motion, result, skin, units), {}),
+               PageFigure(label, make_glb(motion, result, skin, units)[0], cell_figures(motion, result))]
+    return page_html(figures, title=title, fps=motion.fps, ends=page_ends(motion),
+                     sigma_frames=page_sigma(motion, config), tune=tune)

@@ -3,7 +3,7 @@ writes the picture its file name asks for.
 
 ``.png`` still frames of the skinned body captured and exaggerated, or one
 joint's path (`stills`); ``.gif`` and ``.mp4`` the two bodies side by side,
-moving (`animation`). The bodies are posed in `posing`, and what each picture
+moving (`animation`); ``.html`` a page that plays the two GLBs (`page`). The bodies are posed in `posing`, and what each picture
 shows is chosen in `framing`.
 """
 
@@ -25,7 +25,7 @@ from .stills import render_preview, render_trajectory
 
 __all__ = ["write_preview", "joint_named", "PREVIEW_SUFFIXES"]
 
-PREVIEW_SUFFIXES = (".png", ".gif", ".mp4")
+PREVIEW_SUFFIXES = (".png", ".gif", ".mp4", ".html")
 
 
 def joint_named(skeleton: Skeleton, name: str, where: str = "the clip") -> int:
@@ -44,7 +44,8 @@ def _kind(output: Path, trajectory: str | None) -> str:
     suffix = output.suffix.lower()
     if suffix not in PREVIEW_SUFFIXES:
         found = f"cannot write {suffix}" if suffix else "no suffix"
-        raise ConfigError(f"{output}: {found}; previews are .png (still frames), .gif or .mp4 (animations)")
+        raise ConfigError(f"{output}: {found}; previews are .png (still frames), .gif or .mp4 (animations) "
+                          f"or .html (a page that plays them)")
     if trajectory is not None and suffix != ".png":
         raise ConfigError(f"{output}: a joint's trajectory is a still picture; name the file .png")
     if suffix == ".mp4" and shutil.which("ffmpeg") is None:
@@ -61,7 +62,8 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
 
     By the suffix: ``.png`` the body at ``frames`` evenly spaced frames (`render_preview`), or
     with ``trajectory`` (a joint's name) that joint's paths (`render_trajectory`); ``.gif``
-    an animation (`render_gif`); ``.mp4`` the same through ffmpeg (`render_mp4`). ``start``
+    an animation (`render_gif`); ``.mp4`` the same through ffmpeg (`render_mp4`); ``.html`` a page
+    that plays the captured and the exaggerated GLB, with the hands' and feet's paths (`page.run_page`). ``start``
     and ``seconds`` choose the part of the motion shown (default: all of it; an animation
     stops at `MAX_SECONDS`). The name, the joint and ffmpeg are checked and the target is
     checked (never an input; taken only with ``overwrite``) before the clip is run. ``skin``
@@ -94,6 +96,12 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
         data = render_gif(motion, result, start=start, seconds=seconds, max_fps=max_fps, skin=skin)
     elif kind == ".mp4":
         data = render_mp4(motion, result, start=start, seconds=seconds, max_fps=max_fps, skin=skin)
+    elif kind == ".html":
+        from .page import run_page
+
+        name = Path(where).name
+        data = run_page(motion, result, config, label=label_of(config), skin=skin, title=name,
+                        units=config.glb.units).encode("utf-8")
     elif joint is not None:
         data = render_trajectory(motion, result, joint, config,
                                  frames=preview_window(motion, result, start=start, seconds=seconds))
@@ -102,3 +110,11 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
         data = render_preview(motion, result, at=list(np.linspace(begin, end - 1, frames).astype(int)), skin=skin)
     atomic_write(output, data, overwrite=True)
     return output
+
+
+def label_of(config) -> str:
+    """A run's caption on a page: its sigma and omega (the settings tuned most)."""
+    x = config.extrapolate
+    if not x.enabled:
+        return "exaggerated (no extrapolation)"
+    return f"sigma {x.sigma}, omega {x.omega:g}"
