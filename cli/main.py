@@ -1,7 +1,7 @@
 """The ``mocap-exaggerate`` command line: parses options, calls the library, reports.
 
 No algorithm lives here. One module per command (`exaggerate`, `batch`, `plan`, `info`,
-`preview`, `compare`, `presets`), each registering itself on the group in `app` when imported; the
+`preview`, `compare`, `tune`, `presets`), each registering itself on the group in `app` when imported; the
 options they share are in `options`. ``mocap-exaggerate`` runs `main`.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 
-from . import batch, compare, exaggerate, info, plan, presets, preview  # noqa: F401  (each registers its command)
+from . import batch, compare, exaggerate, info, plan, presets, preview, tune  # noqa: F401  (each registers its command)
 from .app import cli
 
 __all__ = ["cli", "main"]

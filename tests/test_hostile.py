@@ -429,13 +429,16 @@ BASE = {"exaggerate": ["exaggerate", "clip.bvh", "-o", "out", "--no-glb", "--sub
         "batch": ["batch", "in", "out", "--no-glb", "--subjoints", "2", "-j", "1"],
         "plan": ["plan", "in", "out"],
         "preview": ["preview", "clip.bvh", "-o", "p.png", "--subjoints", "2", "--frames", "1"],
-        "info": ["info", "clip.bvh"]}
+        "info": ["info", "clip.bvh"],
+        "compare": ["compare", "clip.bvh", "-o", "g.png", "--omega", "2,3", "--subjoints", "2", "--frames", "1"],
+        "tune": ["tune", "clip.bvh", "--subjoints", "2"]}
 #: Hostile values an option takes as they are: any text names a folder or a file to write, and a
 #: preview may show every second there is.
 TAKEN = {("exaggerate", "--output"): {b"nan", b"inf", b"-1", b"1e309", b"a\nb", b"\xff\xfe"},
          ("exaggerate", "--name"): {b"nan", b"inf", b"-1", b"1e309", b"\xff\xfe"},
          ("exaggerate", "--trails"): {b"nan", b"inf", b"-1", b"1e309", b"a\nb", b"\xff\xfe"},
-         ("preview", "--seconds"): {b"inf", b"1e309"},
+         ("preview", "--seconds"): {b"inf", b"1e309"}, ("compare", "--seconds"): {b"inf", b"1e309"},
+         ("compare", "--output"): set(),
          # An empty animation name is none: a glTF's first (and a BVH's one clip).
          ("exaggerate", "--clip"): {b""}, ("info", "--clip"): {b""}}
 
@@ -447,12 +450,18 @@ def _swept_options() -> list:
 
     root = _click.Context(cli)
     shared = {(tuple(p.opts), p.help) for p in cli.get_command(root, "exaggerate").params}
+    # compare takes a run's options as lists of text, each cell's words parsed as exaggerate's (swept there)
+    from mocap_exaggerate_cli.compare import _settings
+
+    theirs = {tuple(p.opts) for p in _settings.params}
     params = []
     for name in BASE:
         for param in cli.get_command(root, name).params:
             if not isinstance(param, _click.Option) or param.name in ("verbose", "quiet", "help"):
                 continue
             if name != "exaggerate" and (tuple(param.opts), param.help) in shared:
+                continue
+            if name == "compare" and tuple(param.opts) in theirs:
                 continue
             params.append(pytest.param(name, param.opts[-1], param.is_flag, id=f"{name} {param.opts[-1]}"))
     return params

@@ -124,7 +124,12 @@ def page_html(figures: list[PageFigure], *, title: str, fps: float, ends: list[s
             "tune": None if tune is None else _check_tune(tune)}
     fills = {"title": html.escape(str(title)), "data": _script_json(data), "viewer": _web_file("viewer.js")}
     # One pass over the template: what is filled in is never searched for placeholders again.
-    return re.sub(r"\{\{(\w+)\}\}", lambda match: fills[match.group(1)], _web_file("page.html"))
+    text = re.sub(r"\{\{(\w+)\}\}", lambda match: fills[match.group(1)], _web_file("page.html"))
+    # A name read from a file name that is not UTF-8 (its bytes kept as lone surrogates) shows as U+FFFD.
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+    except UnicodeEncodeError:  # a surrogate no file name made
+        return text.encode("utf-8", "surrogatepass").decode("utf-8", "replace")
 
 
 def page_ends(motion) -> list[str]:

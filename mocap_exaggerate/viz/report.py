@@ -3,7 +3,8 @@
 `write_pictures` draws a converted clip's two pictures (in the worker that
 converted it): the captured and exaggerated body at the frames where it is
 most exaggerated, and the path of its fastest end effector captured, averaged
-and exaggerated (Kwon and Lee's Figure 3). They go to ``OUT_DIR/report/``,
+and exaggerated (Kwon and Lee's Figure 3), and writes the page that plays it (`page`, linked as
+"play"). They go to ``OUT_DIR/report/``,
 mirroring the clips' folders, with a small record of the BVH they were drawn
 from, so a resumed batch knows whether they still show its output.
 `write_report` then writes the page from the batch's results and the clips'
@@ -29,12 +30,13 @@ GENERATOR = "mocap_exaggerate batch report"
 
 
 def picture_paths(out_dir: str | os.PathLike, manifest: str | os.PathLike) -> dict[str, Path]:
-    """The report files of the clip whose manifest is ``manifest``: ``preview``, ``trajectory``, ``record``."""
+    """The report files of the clip whose manifest is ``manifest``: ``preview``, ``trajectory``, ``page`` (the
+    page that plays it, `mocap_exaggerate.viz.page`), ``record``."""
     relative = Path(os.path.relpath(Path(manifest), Path(out_dir)))
     folder = Path(out_dir) / REPORT_FOLDER / relative.parent
     stem = relative.stem
     return {"preview": folder / f"{stem}.preview.png", "trajectory": folder / f"{stem}.trajectory.png",
-            "record": folder / f"{stem}.report.json"}
+            "page": folder / f"{stem}.page.html", "record": folder / f"{stem}.report.json"}
 
 
 def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
@@ -45,6 +47,7 @@ def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
     """
     from ..io.files import write_files
     from .framing import fastest_end, telling_frames, telling_window
+    from .page import run_page
     from .stills import render_preview, render_trajectory
 
     motion, result = record.captured, record.result
@@ -55,8 +58,10 @@ def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
     window = telling_window(motion, result, joint, world=world)
     info = {"bvh": record.manifest["outputs"]["hashes"]["bvh"], "joint": motion.skeleton.names[joint],
             "frames": frames, "window": list(window), "preview": paths["preview"].name,
-            "trajectory": paths["trajectory"].name}
-    write_files([(paths["preview"], render_preview(motion, result, at=frames, width=1.8, dpi=110)),
+            "trajectory": paths["trajectory"].name, "page": paths["page"].name}
+    page = run_page(motion, result, config, label="exaggerated", title=Path(record.outputs["manifest"]).stem)
+    write_files([(paths["page"], page.encode("utf-8")),
+                 (paths["preview"], render_preview(motion, result, at=frames, width=1.8, dpi=110)),
                  (paths["trajectory"], render_trajectory(motion, result, joint, config, frames=window, dpi=100,
                                                           world=world)),
                  (paths["record"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))], overwrite=True)
@@ -76,7 +81,8 @@ def _current_record(paths: dict[str, Path], listed: dict | None) -> dict | None:
     if info is None or listed is None:
         return None
     bvh = listed.get("outputs", {}).get("hashes", {}).get("bvh")
-    current = bvh is not None and info.get("bvh") == bvh and paths["preview"].is_file() and paths["trajectory"].is_file()
+    current = bvh is not None and info.get("bvh") == bvh and all(paths[kind].is_file()
+                                                                 for kind in ("preview", "trajectory", "page"))
     return info if current else None
 
 
@@ -151,6 +157,7 @@ def _row(out_dir: Path, result, number: int) -> str:
         paths = picture_paths(out_dir, manifest_path)
         info = _current_record(paths, listed)
         if info is not None:
+            links += f' <a href="{_href(out_dir, paths["page"])}" class="play">play</a>'
             pictures = (f'<td><a href="{_href(out_dir, paths["preview"])}"><img loading="lazy" alt="captured and '
                         f'exaggerated poses of {name}" src="{_href(out_dir, paths["preview"])}" class="preview"></a></td>'
                         f'<td><a href="{_href(out_dir, paths["trajectory"])}"><img loading="lazy" alt="path of '
