@@ -73,3 +73,29 @@ def test_pictures_are_the_same_bytes_every_time():
     motion, result, config = exaggerate(RUN)
     assert render_trajectory(motion, result, None, config) == render_trajectory(motion, result, None, config)
     assert render_preview(motion, result, at=[10, 50]) == render_preview(motion, result, at=[10, 50])
+
+
+def test_previews_of_one_clip_at_different_settings_show_the_body_at_one_scale():
+    # Issue 27: nine previews of a sweep came out 499-801 pixels tall, each body at its own scale.
+    import io
+
+    from PIL import Image
+
+    from mocap_exaggerate.viz.animation import animation_frames, render_frames
+
+    sit = SAMPLE_DIR / "mocapbank_sit_down_stand_up.bvh"
+    stills, moving = [], []
+    for preset in ("subtle", "looney"):
+        motion, result, _ = exaggerate(sit, preset=preset)
+        picture = np.asarray(Image.open(io.BytesIO(render_preview(motion, result, at=[60, 200, 330]))).convert("RGB"))
+        stills.append(picture)
+        moving.append(next(iter(render_frames(motion, result, animation_frames(motion, result)[0]))))
+    # The stills fit in the room left around the captured body: the same size, the captured row the same pixels.
+    assert stills[0].shape == stills[1].shape
+    top = stills[0].shape[0] // 2
+    np.testing.assert_array_equal(stills[0][:top], stills[1][:top])
+    assert (stills[0][top:] != stills[1][top:]).any()  # and the exaggerated ones differ
+    # Looney swings past that room in the animation: a wider picture, the captured body the same size in it.
+    assert moving[0].shape[0] == moving[1].shape[0] and moving[0].shape[1] < moving[1].shape[1]
+    areas = [int(((m[:, : m.shape[1] // 2] < 200).all(axis=-1)).sum()) for m in moving]
+    assert areas[0] > 1000 and abs(areas[0] - areas[1]) <= 0.01 * areas[0], areas

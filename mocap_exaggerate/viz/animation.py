@@ -23,7 +23,7 @@ from ..core.errors import ConfigError, check_number
 from ..core.motion import Motion
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin
-from .framing import camera_centres, preview_window, view_limits
+from .framing import camera_centres, preview_window, steady_view
 from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, pose_bodies
 from .raster import BATCH, Canvas, draw_body, in_order, write
 
@@ -62,9 +62,11 @@ def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
     """RGB pictures ``(H, W, 3) uint8``, one per output frame of ``frames``: the captured body
     (left, grey) and the exaggerated one (right, orange) side by side, one camera, one scale.
 
-    height : pixels of the body panels; a title and a frame label add 40. ``H`` and ``W`` are even
-    (as H.264 wants) and the same for every picture.
-    The view covers every vertex of both bodies in every frame (`view_limits`). The camera
+    height : a body height is 0.75 ``height`` pixels; a title and a frame label add 40. ``H`` and ``W``
+    are even (as H.264 wants) and the same for every picture.
+    The view covers every vertex of both bodies in every frame, and at least the captured body with a
+    quarter of its height around it (`steady_view`): animations of one clip at different settings are
+    the same size with the body at one scale, but where one exaggerates further. The camera
     follows the captured root across when it travels (`camera_centres`); ticks on the ground
     then scroll by with the travel. Both bodies are posed, shaded and drawn (`mocap_exaggerate.viz.raster`)
     for a batch of frames at once.
@@ -76,11 +78,12 @@ def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
     tall = motion.skeleton.height()
     shown_seconds = (frames[1] - frames[0]) * motion.frame_time if len(frames) > 1 else motion.frame_time
     centre = camera_centres(bodies.root[:, right], points, tall, max(0.4 / shown_seconds, 1.0))
-    half, low, high = view_limits(points, centre)
-    panel_h = max(int(height), 16)
-    panel_w = math.ceil(panel_h * 2.0 * half / (high - low))
-    half = 0.5 * panel_w / panel_h * (high - low)  # the panel's own scale: at least the fitted half width
-    scale = panel_h / (high - low)
+    half, low, high = steady_view(bodies.captured[..., [right, up]], points, centre, tall)
+    # One scale for every animation of the clip, whatever its settings: 0.75 ``height`` pixels a body height.
+    scale = 0.75 * max(int(height), 16) / tall if tall > 0 else max(int(height), 16) / (high - low)
+    panel_h = max(int(math.ceil((high - low) * scale)), 16)
+    panel_w = max(int(math.ceil(2.0 * half * scale)), 16)
+    half = 0.5 * panel_w / scale
     top, bottom, gap = 22, 18, 10
     gap += (2 * panel_w + gap) % 2
     bottom += (panel_h + top + bottom) % 2

@@ -18,7 +18,7 @@ from ..core.skeleton import Skeleton
 from ..pipeline import PipelineResult
 
 __all__ = ["lined_up", "telling_frames", "telling_window", "fastest_end", "preview_window", "view_axes",
-           "view_limits", "camera_centres"]
+           "view_limits", "steady_view", "camera_centres"]
 
 
 def lined_up(motion: Motion, result: PipelineResult, world: np.ndarray | None = None) -> tuple[np.ndarray, int]:
@@ -163,6 +163,21 @@ def view_limits(points: np.ndarray, centre: np.ndarray, *, margin: float = 0.04,
     grow = max(2.0 * half / max_aspect - (high - low), 0.0) / 2.0
     low, high = low - grow, high + grow
     return max(half, 0.5 * min_aspect * (high - low)), low, high
+
+
+def steady_view(captured: np.ndarray, everything: np.ndarray, centre: np.ndarray, tall: float, *,
+                room: float = 0.15) -> tuple[float, float, float]:
+    """A view at one scale whatever the settings: `view_limits` of the ``captured`` points (F, N, 2) with
+    ``room`` times the body's height ``tall`` around them, grown only where ``everything`` drawn (F, M, 2)
+    goes further. Two previews of one clip with different settings then show the body at the same size
+    in pictures of the same size, unless one exaggerates past that room (nine previews of a sweep came out
+    499 to 801 pixels tall, each body at its own scale)."""
+    half, low, high = view_limits(captured, centre, margin=0.0)
+    pad = room * tall if tall > 0 else 0.0
+    half, low, high = half + pad, low - pad, high + pad
+    across = np.abs(everything[..., 0] - centre[:, None])
+    return (max(half, float(across.max()) * 1.02), min(low, float(everything[..., 1].min())),
+            max(high, float(everything[..., 1].max())))
 
 
 def camera_centres(root_across: np.ndarray, points: np.ndarray, tall: float, sigma: float) -> np.ndarray:

@@ -14,7 +14,7 @@ import numpy as np
 from ..core.motion import Motion
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin
-from .framing import fastest_end, lined_up, view_limits
+from .framing import fastest_end, lined_up, steady_view
 from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, pose_bodies
 from .raster import Canvas, draw_body, write
 
@@ -26,19 +26,25 @@ def render_preview(motion: Motion, result: PipelineResult, *, frames: int = 5, w
     """A PNG: the captured (top, grey) and exaggerated (bottom, orange) body at a few frames.
 
     ``at``: the output frames to draw (e.g. `telling_frames`); default ``frames`` evenly spaced.
-    ``width``: inches per column (at ``dpi``). Every column is centred on the captured root and all
-    panels share one scale and one height range, taller where a stretch reaches higher (`view_limits`).
+    ``width * dpi``: pixels a body height. Every column is centred on the captured root and all panels
+    share one scale and one height range, room for the captured body and a sixth of its height around it,
+    more only where the exaggeration goes further (`steady_view`): previews of one clip at different
+    settings come out the same size, the body at one scale.
     Drawn by `mocap_exaggerate.viz.raster`.
     """
     first = result.first
     last = result.world_positions.shape[0] - 1
     picks = np.unique(np.linspace(first, last, frames).astype(int) if at is None else np.clip(at, 0, last))
     bodies = pose_bodies(motion, result, picks, skin, dtype=np.float32)
-    right = bodies.axes[0]
-    half, low, high = view_limits(bodies.screen_points(), bodies.root[:, right])
-    column = max(int(round(width * dpi)), 16)
-    scale = column / (2.0 * half)
-    row = max(int(round((high - low) * scale)), 16)
+    right, up, _ = bodies.axes
+    tall = motion.skeleton.height()
+    half, low, high = steady_view(bodies.captured[..., [right, up]], bodies.screen_points(), bodies.root[:, right],
+                                  tall)
+    # One scale for every preview of the clip, whatever its settings: ``width * dpi`` pixels a body height.
+    scale = width * dpi / tall if tall > 0 else width * dpi / (2.0 * half)
+    column = max(int(np.ceil(2.0 * half * scale)), 16)
+    half = column / (2.0 * scale)
+    row = max(int(np.ceil((high - low) * scale)), 16)
     top, title_row, margin = 26, 16, 6
     width_px = len(picks) * column + 2 * margin
     height_px = top + title_row + 2 * row + margin
