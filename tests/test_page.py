@@ -353,10 +353,13 @@ def test_the_tuner_posts_each_change_and_shows_the_run_it_gets_back(browser):
         assert page.locator("#tune-status").inner_text() == "done in 0.25 s"
 
         omega = page.locator("#settings input[data-key='extrapolate.omega']")
-        for value in ("5", "5.5", "6"):  # quick moves are one run, of the last value
+        for value in ("5", "5.5", "6"):  # quick moves: one run at a time, the last value run last
             omega.fill(value)
-        page.wait_for_function("player.tuned === 2", timeout=15_000)
-        assert server.asked[1:] == [{"preset": "subtle", "settings": {"extrapolate.sigma": 0.2, "extrapolate.omega": 6}}]
+        page.wait_for_function("document.querySelector('#command').textContent.endsWith('omega=6')", timeout=15_000)
+        page.wait_for_function("player.tuned >= 2", timeout=15_000)
+        assert 2 <= len(server.asked) <= 4
+        assert server.asked[-1] == {"preset": "subtle", "settings": {"extrapolate.sigma": 0.2, "extrapolate.omega": 6}}
+        tuned = page.evaluate("player.tuned")
         assert page.locator("#command").inner_text().endswith("--set extrapolate.sigma=0.2 --set extrapolate.omega=6")
 
         page.locator("#copy-command").click()
@@ -366,7 +369,7 @@ def test_the_tuner_posts_each_change_and_shows_the_run_it_gets_back(browser):
         omega.fill("8")
         page.wait_for_function("document.querySelector('#tune-status').classList.contains('error')", timeout=15_000)
         assert "extrapolate.omega must be a number in [1, 7], got 8" in page.locator("#tune-status").inner_text()
-        assert page.evaluate("[player.tuned, player.error]") == [2, None]  # the last good run stays shown
+        assert page.evaluate("[player.tuned, player.error]") == [tuned, None]  # the last good run stays shown
         page.context.close()
     finally:
         server.shutdown()

@@ -102,10 +102,17 @@ class Tuner:
         from ..config import preset_names
 
         self.source, self.motion, self.skin, self.units = source, motion, skin, units
-        self.preset, self.configure, self.base = preset, configure, tuple(base)
+        self.preset, self._configure, self.base = preset, configure, tuple(base)
+        self._configured: dict[str, object] = {}
         self.presets = preset_names()
         self.given = dict(start or {})
         self.lock = threading.Lock()
+
+    def configure(self, preset: str):
+        """The config the other options make with ``preset`` (found once a preset)."""
+        if preset not in self._configured:
+            self._configured[preset] = self._configure(preset)
+        return self._configured[preset]
 
     def _own(self, preset: str) -> dict[str, object]:
         """The sliders' values ``configure(preset)`` has."""

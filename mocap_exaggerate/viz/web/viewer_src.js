@@ -22,7 +22,7 @@ const PATH_COLOURS = ['#6b6b70', '#f08c2e', '#3d7fd9', '#9b59b6', '#d64541', '#1
 const AVERAGE_COLOUR = '#27ae60';
 const BACKGROUND = '#f4f4f1';
 const SPEEDS = [0.25, 0.5, 1, 2];
-const TUNE_DEBOUNCE_MS = 150;
+const TUNE_DEBOUNCE_MS = 30;  // a burst of input events (one drag step) is one run
 const UP = new Vector3(0, 1, 0);
 
 const data = JSON.parse(document.getElementById('data').textContent);
@@ -534,6 +534,8 @@ async function load(index, base64) {
 
 let tuneTimer = null;
 let tuneSerial = 0;
+let tuneBusy = false;     // a run is on its way
+let tunePending = null;  // {presetOnly}: a change made while it was
 
 function decimals(step) {
   const text = String(step);
@@ -606,9 +608,30 @@ function tuneStatus(text, error) {
 
 // presetOnly: the preset was changed and the page does not know its settings, so none are sent and the
 // server applies the preset alone (its reply's "settings", when given, moves the sliders there).
+// A change runs at once (but for a burst of events); a change while a run is on its way runs when it is
+// back, with the sliders as they are then: one run at a time, the last values always run, and no wait
+// on a timer after a pause (a 150 ms debounce was a third of a 1,000-frame clip's round trip).
 function scheduleRun(presetOnly) {
+  if (tuneBusy) {
+    tunePending = { presetOnly };
+    return;
+  }
   clearTimeout(tuneTimer);
-  tuneTimer = setTimeout(() => runTuner(presetOnly), TUNE_DEBOUNCE_MS);
+  tuneTimer = setTimeout(() => startRun(presetOnly), TUNE_DEBOUNCE_MS);
+}
+
+async function startRun(presetOnly) {
+  tuneBusy = true;
+  try {
+    await runTuner(presetOnly);
+  } finally {
+    tuneBusy = false;
+    if (tunePending) {
+      const next = tunePending;
+      tunePending = null;
+      startRun(next.presetOnly);
+    }
+  }
 }
 
 async function runTuner(presetOnly) {
