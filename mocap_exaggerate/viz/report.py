@@ -60,10 +60,10 @@ def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
             "frames": frames, "window": list(window), "preview": paths["preview"].name,
             "trajectory": paths["trajectory"].name, "page": paths["page"].name}
     page = run_page(motion, result, config, label="exaggerated", title=Path(record.outputs["manifest"]).stem)
-    write_files([(paths["page"], page.encode("utf-8")),
-                 (paths["preview"], render_preview(motion, result, at=frames, width=1.8, dpi=110)),
+    write_files([(paths["preview"], render_preview(motion, result, at=frames, width=1.8, dpi=110)),
                  (paths["trajectory"], render_trajectory(motion, result, joint, config, frames=window, dpi=100,
                                                           world=world)),
+                 (paths["page"], page.encode("utf-8")),
                  (paths["record"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))], overwrite=True)
     return info
 
