@@ -22,7 +22,8 @@ from mocap_exaggerate import __version__
 from mocap_exaggerate.core.errors import MocapError
 from mocap_exaggerate.io.files import OutputExistsError
 
-__all__ = ["cli", "UserError", "INTERNAL_ERROR", "fail_cleanly", "verbosity_options", "quiet", "shown", "one_line"]
+__all__ = ["cli", "UserError", "INTERNAL_ERROR", "fail_cleanly", "verbosity_options", "quiet", "shown", "one_line",
+           "printable"]
 
 log = logging.getLogger("mocap_exaggerate")
 
@@ -75,8 +76,23 @@ def shown(text: str, most: int = 80) -> str:
 def one_line(message: str, most: int = _LONGEST_MESSAGE) -> str:
     """``message`` as one printable line: line breaks, control characters and undecodable bytes
     escaped as Python writes them (``\\n``, ``\\udcff``), cut short past ``most`` characters."""
-    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
+    text = printable(message)
     return text if len(text) <= most else f"{text[:most]}... ({len(text)} characters)"
+
+
+def printable(text: str) -> str:
+    """``text`` with control characters (a terminal's escape sequences) and undecodable bytes escaped
+    as Python writes them: a joint or file name cannot drive the terminal it is shown on."""
+    return "".join(c if c.isprintable() or c == " " else repr(c)[1:-1] for c in str(text))
+
+
+class _Printable(logging.Formatter):
+    """Log lines one to a line, escaped (`printable`): a warning quoting a name shows it, not obeys it."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = super().format(record)
+        head, _, tail = text.partition("\nTraceback")  # -vv's traceback keeps its lines
+        return printable(head) + (f"\nTraceback{tail}" if tail else "")
 
 
 def _set_verbosity(ctx: click.Context, param: click.Parameter, value: Any) -> None:
@@ -88,7 +104,9 @@ def _set_verbosity(ctx: click.Context, param: click.Parameter, value: Any) -> No
     elif value:
         state["quiet"] = True
     level = logging.ERROR if state["quiet"] else (logging.WARNING, logging.INFO, logging.DEBUG)[min(state["verbose"], 2)]
-    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr, force=True)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_Printable("%(levelname)s: %(message)s"))
+    logging.basicConfig(level=level, handlers=[handler], force=True)
 
 
 def verbosity_options(func: Callable) -> Callable:

@@ -10,14 +10,25 @@ from pathlib import Path
 import click
 
 from .app import UserError, cli, fail_cleanly, quiet, shown, verbosity_options
-from .options import FilePath, character_options, config_from_options, pipeline_options
+from .options import FilePath, config_from_options, run_options_command
+
+#: The options of a run, as ``exaggerate`` reads them: each cell's words are parsed by this command.
+_settings = run_options_command()
 
 
-@click.command()
-@pipeline_options
-@character_options
-def _settings(**options) -> None:
-    """The options of a run, as ``exaggerate`` reads them: each cell's words are parsed by this command."""
+def _one_value() -> set[str]:
+    """The parameters that say how the clip is read and which character draws it (the ``input`` and ``glb``
+    blocks, ``--config``): every cell shares them, so they take one value."""
+    from mocap_exaggerate.config import PipelineConfig
+    from mocap_exaggerate.core.settings import flagged_settings
+
+    from .options import setting_param
+
+    return {"config_file"} | {setting_param(block, key) for block, key, _ in flagged_settings(PipelineConfig)
+                              if block in ("input", "glb")}
+
+
+_ONE_VALUE = _one_value()
 
 
 def _as_list(param: click.Option) -> click.Option:
@@ -26,7 +37,7 @@ def _as_list(param: click.Option) -> click.Option:
     if param.is_flag:
         return param
     help_text = param.help or ""
-    if not param.multiple:
+    if not param.multiple and param.name not in _ONE_VALUE:
         help_text += " Comma-separated values compare each."
     return click.Option([*param.opts, param.name], type=str, multiple=param.multiple, default=None,
                         metavar=param.metavar, help=help_text)
@@ -64,6 +75,10 @@ def cells_of(options: dict) -> tuple[list, int, list[str]]:
         elif isinstance(param, click.Option):
             fixed += _words(param, value)
     varying = [(param, values) for param, values in lists if len(values) > 1]
+    for param, values in varying:  # one clip, read one way, one character: what every cell is drawn from
+        if param.name in _ONE_VALUE:
+            raise UserError(f"{param.opts[-1]} {shown(','.join(values))}: compare runs one clip, read one way, with "
+                            f"one character; give {param.opts[-1]} one value (and compare the settings of the run)")
     fixed += [word for param, values in lists if len(values) == 1 for word in (param.opts[-1], values[0])]
     if not varying:
         raise UserError("nothing to compare: give an option a comma-separated list, e.g. --omega 2,4,6 or "
@@ -133,9 +148,8 @@ def compare(input_path: Path, output: Path, count: int, start: float, seconds: f
     _, ran = write_compare(sys.stdin.buffer if from_stdin else input_path, output, cells, columns=columns,
                            frames=count, start=start, seconds=seconds, overwrite=overwrite,
                            label="<stdin>" if from_stdin else None)
-    if quiet():
-        return
-    click.echo(f"wrote {output}", err=True)
+    if not quiet():
+        click.echo(f"wrote {output}", err=True)
     clip = "-" if from_stdin else str(input_path)
     for r in ran:
         f = r.figures

@@ -60,6 +60,10 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
 
     preset, config = config_from_options(options)
     from_stdin = str(input_path) == "-"
+    for stream, which in ((sys.stdin, "input") if from_stdin else (None, None),
+                          (sys.stdout, "output") if str(output) == "-" else (None, None)):
+        if which is not None and (stream is None or stream.closed):  # (started with <&- or >&-)
+            raise UserError(f"standard {which} is closed; give a file, or open it")
     record = convert(
         sys.stdin.buffer if from_stdin else input_path,
         sys.stdout.buffer if str(output) == "-" else output,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from .app import cli, fail_cleanly, verbosity_options
+from .app import cli, fail_cleanly, printable, verbosity_options
 from .options import FilePath
 
 
@@ -45,39 +45,44 @@ def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float
                     root_offset=root_offset, up=up, clip=clip)
     orders = data["rotation_orders"]
     if as_json:
-        click.echo(json.dumps(data, indent=2))
+        click.echo(json.dumps(data, indent=2))  # (JSON escapes control characters itself)
         return
-    click.echo(f"{label}")
-    click.echo(f"  joints      {data['joints']} (+{data['end_sites']} End Sites), root {data['root']}")
+    say(f"{label}")
+    say(f"  joints      {data['joints']} (+{data['end_sites']} End Sites), root {data['root']}")
     added = " (added to the OFFSET: --root-offset add)" if data["root_offset"] == "add" else ""
-    click.echo(f"  channels    {data['channels']}; position channels on "
+    say(f"  channels    {data['channels']}; position channels on "
                f"{', '.join(data['position_channel_joints'][:6]) or 'none'}"
                f"{' ...' if len(data['position_channel_joints']) > 6 else ''}{added}")
-    click.echo(f"  rotation    {', '.join(f'{o} x{n}' for o, n in orders.items())}")
-    click.echo(f"  frames      {data['frames']} at {data['fps']:g} fps ({data['duration_s']:.3f} s)")
-    click.echo(f"  height      {data['height']:g} units along {data['up_axis']} (rest pose)")
+    say(f"  rotation    {', '.join(f'{o} x{n}' for o, n in orders.items())}")
+    say(f"  frames      {data['frames']} at {data['fps']:g} fps ({data['duration_s']:.3f} s)")
+    say(f"  height      {data['height']:g} units along {data['up_axis']} (rest pose)")
     for animation in data.get("animations", []):
         taken = " (this one)" if animation["name"] == data["clip"] else ""
-        click.echo(f"  animation   {animation['name']}: {animation['duration_s']:g} s, {animation['keys']} keys, "
+        say(f"  animation   {animation['name']}: {animation['duration_s']:g} s, {animation['keys']} keys, "
                    f"{animation['channels']} channels{taken}")
     if data["rest_frames"]:
-        click.echo(f"  rest pose   {data['rest_frames']} leading synthetic frame(s) (see --tpose)")
+        say(f"  rest pose   {data['rest_frames']} leading synthetic frame(s) (see --tpose)")
     for warning in data["warnings"]:
-        click.echo(f"  warning     {warning}")
+        say(f"  warning     {warning}")
     if limbs:
         for name, chain in data["limbs"].items():
-            click.echo(f"  {name:<11} {' > '.join(chain)}")
+            say(f"  {name:<11} {' > '.join(chain)}")
     if contacts:
         floor = data["contacts"]["floor"]
-        click.echo(f"  floor       {floor['height']:g} along {floor['up']}{floor['axis']} (the lowest any joint goes)")
+        say(f"  floor       {floor['height']:g} along {floor['up']}{floor['axis']} (the lowest any joint goes)")
         for joint, runs in data["contacts"]["contacts"].items():
             spans = ", ".join(f"{a}-{b}" for a, b in runs) or "none"
-            click.echo(f"  contact     {joint}: {spans}")
+            say(f"  contact     {joint}: {spans}")
     if groups:
-        click.echo(f"  sub-joints  {data['subjoints']} with the default 4 sub-links per link")
+        say(f"  sub-joints  {data['subjoints']} with the default 4 sub-links per link")
         for chain in data["groups"]:
-            click.echo(f"  group       {chain[0]} | {' > '.join(chain[1:])}")
+            say(f"  group       {chain[0]} | {' > '.join(chain[1:])}")
         rigid = data["rigid"]
         if rigid:
             shown = ", ".join(rigid[:8]) + (f", ... ({len(rigid)} in all)" if len(rigid) > 8 else "")
-            click.echo(f"  rigid       {shown}")
+            say(f"  rigid       {shown}")
+
+
+def say(line: str) -> None:
+    """One line of the report, names in it escaped (`printable`): a joint called ESC[2J shows, not clears."""
+    click.echo(printable(line))

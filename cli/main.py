@@ -3,21 +3,39 @@
 No algorithm lives here. One module per command (`exaggerate`, `batch`, `plan`, `info`,
 `preview`, `compare`, `tune`, `presets`), each registering itself on the group in `app` when imported; the
 options they share are in `options`. ``mocap-exaggerate`` runs `main`.
+
+The commands are imported inside `main`, under its Ctrl-C handling: one pressed in the first tenths of a
+second (while click and NumPy load) ends the command quietly (exit 130) instead of printing a traceback.
 """
 
 from __future__ import annotations
 
 import sys
 
-from . import batch, compare, exaggerate, info, plan, presets, preview, tune  # noqa: F401  (each registers its command)
-from .app import cli
+__all__ = ["cli", "main"]  # noqa: F822  (cli: the group, made on first use by __getattr__)
 
-__all__ = ["cli", "main"]
+
+def _group():
+    from . import batch, compare, exaggerate, info, plan, presets, preview, tune  # noqa: F401  (each registers its command)
+    from .app import cli
+
+    return cli
 
 
 def main() -> None:
-    code = cli.main(prog_name="mocap-exaggerate")
+    try:
+        group = _group()
+        code = group.main(prog_name="mocap-exaggerate")
+    except KeyboardInterrupt:  # before the group's own handling took over (while loading)
+        sys.stderr.write("Aborted!\n")
+        code = 130
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def __getattr__(name: str):
+    if name == "cli":  # the click group, for tests and embedding (``from mocap_exaggerate_cli.main import cli``)
+        return _group()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 if __name__ == "__main__":

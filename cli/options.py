@@ -33,7 +33,7 @@ from .app import shown
 
 __all__ = ["FilePath", "pipeline_options", "output_options", "character_options", "folder_arguments",
            "setting_option", "setting_param", "settings_given", "config_from_options", "given_options",
-           "joint_map_of", "parsed_each", "parse_settings"]
+           "joint_map_of", "parsed_each", "parse_settings", "run_options_command"]
 
 
 class FilePath(click.Path):
@@ -290,3 +290,15 @@ def given_options(ctx: click.Context, exclude: set[str]) -> list[str]:
                     item = item.resolve()
                 words += [param.opts[-1] if param.opts[-1].startswith("--") else param.opts[0], str(item)]
     return words
+
+
+def run_options_command() -> click.Command:
+    """A command of a run's options alone (`pipeline_options` and `character_options`), as ``exaggerate``
+    reads them: ``compare`` parses each cell's words with it, ``tune`` each preset's."""
+    @click.command()
+    @pipeline_options
+    @character_options
+    def run_options(**options) -> None:
+        """A run's options."""
+
+    return run_options

@@ -14,7 +14,8 @@ from .options import FilePath, character_options, config_from_options, pipeline_
 @cli.command()
 @click.argument("input_path", metavar="IN.bvh", type=FilePath(path_type=Path, allow_dash=True))
 @click.option("-o", "--output", required=True, type=FilePath(path_type=Path),
-              help="File to write: .png (still frames), .gif (looping animation) or .mp4 (needs ffmpeg).")
+              help="File to write: .png (still frames), .gif (looping animation), .mp4 (needs ffmpeg) or .html (a "
+                   "page that plays both GLBs).")
 @click.option("--frames", "count", type=click.IntRange(1, 12), default=5, show_default=True,
               help="How many evenly spaced frames a .png shows.")
 @click.option("--trajectory", metavar="JOINT", default=None,
@@ -33,12 +34,14 @@ def preview(input_path: Path, output: Path, count: int, trajectory: str | None, 
     """Render the skinned body captured and exaggerated (no GPU, no display).
 
     A .png shows still frames, captured above and exaggerated below; a .gif or .mp4 plays
-    them side by side at the clip's speed, looping; --trajectory draws one joint's paths.
+    them side by side at the clip's speed, looping; a .html is one self-contained page that
+    plays both GLBs with the hands' and feet's paths; --trajectory draws one joint's paths.
 
     \b
     Examples:
       mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o run.png --preset looney
       mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o run.gif
+      mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o run.html
       mocap-exaggerate preview sample_data/cmu_09_01_run_daz.bvh -o foot.png --trajectory lFoot
     """
     from mocap_exaggerate.viz.preview import write_preview

@@ -32,36 +32,45 @@ def tune(ctx: click.Context, input_path: Path, port: int, **options) -> None:
       mocap-exaggerate tune sample_data/cmu_09_01_run_daz.bvh
       mocap-exaggerate tune sample_data/cmu_09_01_run_daz.bvh --preset looney --port 8765
     """
+    from click.core import ParameterSource
+
     from mocap_exaggerate.config import PipelineConfig
     from mocap_exaggerate.core.settings import flagged_settings
+    from mocap_exaggerate.io.gltf_motion import is_gltf
     from mocap_exaggerate.jobs.job import Character, read_clip
-    from mocap_exaggerate.viz.tune import TUNED, Tuner, serve, slider_values
+    from mocap_exaggerate.viz.tune import TUNED, Tuner, bind_port, serve, slider_values
 
-    from .compare import _settings
-    from .options import setting_param
+    from .options import run_options_command, setting_param
 
     preset, config = config_from_options(options)
+    # A game character is tuned on its own mesh, as exaggerate writes it.
+    own = input_path if is_gltf(input_path) and not config.glb.skin else None
+    character = Character.of(config.glb, glb=True, skin=own, joint_map=None, units=None, influences=None)
+    server = bind_port(port)  # the port first: a taken one is said before the clip is read
     motion, _ = read_clip(input_path, config.input)
-    character = Character.of(config.glb, glb=True, skin=None, joint_map=None, units=None, influences=None)
     skin, _ = character.bound_to(motion, str(input_path))
     # The options given, but the sliders' own (their values start the sliders; the command sets them with --set).
     tuned = {slider.key for slider in TUNED}
-    sliders = {setting_param(block, key) for block, key, _ in flagged_settings(PipelineConfig)
+    sliders = {setting_param(block, key): f"{block}.{key}" for block, key, _ in flagged_settings(PipelineConfig)
                if f"{block}.{key}" in tuned}
     base = given_options(ctx, exclude={"preset", "port", "settings", *sliders})
     raw = ctx.meta.get("mocap_exaggerate.raw", {}).get("settings", [])
     base += [word for item in raw if item.partition("=")[0].strip() not in tuned for word in ("--set", item)]
+    # The sliders' settings the command line gave: where they start, set in every run of the first preset.
+    given = {key for name, key in sliders.items() if ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE}
+    given |= {item.partition("=")[0].strip() for item in raw} & tuned
+    start = {key: value for key, value in slider_values(config, motion.frame_time).items() if key in given}
+    command = run_options_command()
 
     def configure(name: str):
-        return config_from_options(_settings.make_context("tune", ["--preset", name, *base]).params)[1]
+        return config_from_options(command.make_context("tune", ["--preset", name, *base]).params)[1]
 
-    tuner = Tuner(str(input_path), motion, preset, configure, tuple(base), slider_values(config, motion.frame_time),
-                  skin, config.glb.units)
+    tuner = Tuner(str(input_path), motion, preset, configure, tuple(base), start, skin, config.glb.units)
 
     def ready(url: str) -> None:
         if not quiet():
             click.echo(f"tuning {input_path} at {url} (Ctrl-C stops)", err=True)
 
-    serve(tuner, port, ready)
+    serve(server, tuner, ready)
     if not quiet():
         click.echo("stopped", err=True)

@@ -16,10 +16,9 @@ import re
 import tomllib
 from dataclasses import dataclass, field, fields
 from importlib import resources
-from pathlib import Path
 from typing import Any
 
-from .core.errors import ConfigError, check_choice, check_flag, check_number
+from .core.errors import ConfigError, InputError, check_choice, check_flag, check_number
 from .core.settings import Flag, setting
 from .io.bvh import BVH_POSITIONS, FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES, check_bvh_positions
 from .stages.contacts import ContactConfig, TargetSpec, parse_target
@@ -381,12 +380,24 @@ def _parse_toml(text: str, source: str) -> dict[str, Any]:
         raise ConfigError(f"{source}: not valid TOML: {error}") from None
     except RecursionError:
         raise ConfigError(f"{source}: not valid TOML: nested too deeply") from None
+    except ValueError as error:  # an integer of more than 4,300 digits (Python's own limit)
+        raise ConfigError(f"{source}: not a pipeline file: {_short_error(error)}") from None
+
+
+def _short_error(error: Exception) -> str:
+    """An error's message, cut to its first sentence (Python's own for a long integer runs on)."""
+    text = str(error).split(";")[0].split(": value has")[0]
+    return text if len(text) <= 120 else text[:120] + "..."
 
 
 def read_config_text(path: str | os.PathLike) -> str:
     """The text of a pipeline file; ConfigError naming the file when it cannot be read as UTF-8 text."""
+    from .io.files import LIMITS, read_limited
+
     try:
-        data = Path(path).read_bytes()
+        data = read_limited(path, limit=LIMITS["text"], what="config file")
+    except InputError as error:
+        raise ConfigError(str(error)) from None
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such config file") from None
     except IsADirectoryError:

@@ -89,6 +89,86 @@ def first_motion_value(data: bytes, new: bytes) -> bytes:
 # ---------------------------------------------------------------------------- the cases
 
 # Each case: id -> function(tmp, clip, out) returning (args, expected exit code, words expected in the error line).
+def _fifo(folder, name):
+    """A FIFO: reading it blocks until something writes (a clip, a config, a skin once hung the command)."""
+    import os
+
+    path = folder / name
+    os.mkfifo(path)
+    return path
+
+
+def _big_number_toml(folder):
+    path = folder / "big.toml"
+    path.write_text("[extrapolate]\nomega = " + "9" * 5000 + "\n")
+    return path
+
+
+def _big_number_trails(folder):
+    path = folder / "big.json"
+    path.write_text('{"trails": [{"limb": "left_arm", "frames": [' + "9" * 5000 + "]}]}")
+    return path
+
+
+def _frames_over_the_cap(folder, clip):
+    path = folder / "long.bvh"
+    path.write_bytes(clip.read_bytes().replace(b"Frames:\t149", b"Frames:\t600000", 1))
+    return path
+
+
+def _zip_bomb(folder):
+    """A 2 MB .npz that declares 2 GB of zeros (it once filled 6.2 GB before a refusal)."""
+    import zipfile
+
+    path = folder / "bomb.npz"
+    header = b"\x93NUMPY\x01\x00" + b"{'descr': '<f8', 'fortran_order': False, 'shape': (90000000, 3), }".ljust(118) + b"\n"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        with archive.open("vertices.npy", "w", force_zip64=True) as member:
+            member.write(header)
+            for _ in range(128):
+                member.write(bytes(1 << 24))
+    return path
+
+
+def _lying_npy(folder):
+    """An .npz whose array header declares 24 TB in a 1 kB file (a MemoryError traceback once)."""
+    import io
+    import zipfile
+
+    path = folder / "liar.npz"
+    header = b"\x93NUMPY\x01\x00" + b"{'descr': '<f8', 'fortran_order': False, 'shape': (1000000000000, 3), }".ljust(118) + b"\n"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("vertices.npy", header + bytes(64))
+        for name in ("faces", "joint_names", "weights"):
+            buffer = io.BytesIO()
+            np.save(buffer, np.zeros(3))
+            archive.writestr(f"{name}.npy", buffer.getvalue())
+    return path
+
+
+def _bad_deflate(folder):
+    """An .npz whose compressed member is garbage (zlib's own error, once a traceback)."""
+    import zipfile
+
+    good = npz(folder / "good.npz")
+    data = bytearray(good.read_bytes())
+    with zipfile.ZipFile(good) as archive:
+        first = archive.infolist()[0]
+    start = first.header_offset + 30 + len(first.filename) + len(first.extra)
+    path = folder / "deflate.npz"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name in ("vertices", "faces", "joint_names", "joints", "weights"):
+            archive.writestr(f"{name}.npy", b"x" * 400)
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as archive:
+        first = archive.infolist()[0]
+    start = first.header_offset + 30 + len(first.filename) + len(first.extra)
+    data[start:start + first.compress_size] = b"\xff" * first.compress_size
+    path.write_bytes(bytes(data))
+    (folder / "good.npz").unlink()
+    return path
+
+
 CASES = {
     # 1. the input is never overwritten
     "trails onto the input": lambda t, c, o: (["exaggerate", c, "-o", o, "--stretch", "left_arm:20-60:2", "--trails", c,
@@ -229,6 +309,38 @@ CASES = {
                                          _text(t / "c.toml", "[auto_stretch]\nmin_rise = nan\n")], 2, "min_rise"),
     "old strike key": lambda t, c, o: (["exaggerate", c, "-o", o, "--config",
                                         _text(t / "c.toml", "[auto_stretch]\nspeed_factor = 3\n")], 2, "speed_factor"),
+    # issue 28: every input bounded, no traceback
+    "a FIFO as the clip": lambda t, c, o: (["exaggerate", _fifo(t, "take.bvh"), "-o", o], 2, "is a FIFO"),
+    "a device as the clip": lambda t, c, o: (["exaggerate", "/dev/zero", "-o", o], 2, "is a device"),
+    "a FIFO as the config": lambda t, c, o: (["exaggerate", c, "-o", o, "--config", _fifo(t, "p.toml")], 2, "FIFO"),
+    "a device as the config": lambda t, c, o: (["exaggerate", c, "-o", o, "--config", "/dev/zero"], 2, "device"),
+    "a FIFO as the skin": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _fifo(t, "s.npz")], 2, "FIFO"),
+    "a FIFO as the joint map": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", npz(t / "s.npz"),
+                                                 "--joint-map", _fifo(t, "j.map")], 2, "FIFO"),
+    "a FIFO as the path file": lambda t, c, o: (["exaggerate", c, "-o", o, "--path-file", _fifo(t, "p.json")],
+                                                2, "FIFO"),
+    "a 5,000-digit number in a config": lambda t, c, o: (["exaggerate", c, "-o", o, "--config", _big_number_toml(t)],
+                                                         2, "4300 digits"),
+    "a 5,000-digit frame": lambda t, c, o: (["exaggerate", c, "-o", o, "--target", "lHand@" + "9" * 5000], 2,
+                                            "5000 digits"),
+    "a 5,000-digit stretch end": lambda t, c, o: (["exaggerate", c, "-o", o, "--stretch",
+                                                   "left_arm:10-" + "9" * 5000 + ":2"], 2, "5000 digits"),
+    "a 5,000-digit number in a path file": lambda t, c, o: (["exaggerate", c, "-o", o, "--path-file",
+                                                             _big_number_trails(t)], 2, "4,300 digits"),
+    "frames past the cap": lambda t, c, o: (["exaggerate", _frames_over_the_cap(t, c), "-o", o], 2,
+                                            "at most 500,000 frames"),
+    "a zip bomb as the skin": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _zip_bomb(t)], 2, "unpacks to"),
+    "an array header that lies": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _lying_npy(t)], 2,
+                                                  "not a readable .npz"),
+    "a broken deflate stream": lambda t, c, o: (["exaggerate", c, "-o", o, "--skin", _bad_deflate(t)], 2,
+                                                "not a readable .npz"),
+    "a scheduler address without a port": lambda t, c, o: (["batch", t, o, "--scheduler", "tcp://localhost"], 2,
+                                                           "with its port"),
+    "an inproc scheduler": lambda t, c, o: (["batch", t, o, "--scheduler", "inproc://x:1"], 2, "inproc"),
+    "a tls scheduler without certificates": lambda t, c, o: (["batch", t, o, "--scheduler", "tls://127.0.0.1:8786"],
+                                                             2, "certificates"),
+    "a ucx scheduler": lambda t, c, o: (["batch", t, o, "--scheduler", "ucx://127.0.0.1:8786"], 2, "ucx"),
+
 }
 
 
@@ -546,3 +658,159 @@ def test_an_internal_error_is_one_line_exit_3_and_writes_nothing(tmp_path, where
                           capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert done.returncode == 3 and "Traceback" in done.stderr and "a bug planted by the test" in done.stderr
     assert done.stderr.strip().splitlines()[-1].startswith("Error: internal error")
+
+
+# ---------------------------------------------------------------------------- issue 28: the rest
+
+
+def test_a_closed_standard_output_or_input_is_one_line(tmp_path):
+    for args in (["exaggerate", CLIP, "-o", "-"], ["exaggerate", "-", "-o", tmp_path / "out"]):
+        # Started with the stream closed (>&- or <&-), as a shell does it.
+        closing = "exec 1>&-; " if args[-1] == "-" else "exec 0<&-; "
+        words = " ".join(f"'{w}'" for w in map(str, args))
+        done = subprocess.run(["sh", "-c", f"{closing}'{sys.executable}' -m mocap_exaggerate_cli.main {words}"],
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+        assert done.returncode == 2 and "is closed" in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
+def test_ctrl_c_in_the_first_moments_is_quiet(tmp_path):
+    import signal
+    import time
+
+    for delay in (0.02, 0.08, 0.2):
+        process = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "info", str(CLIP)],
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        time.sleep(delay)
+        process.send_signal(signal.SIGINT)
+        _, said = process.communicate(timeout=60)
+        assert "Traceback" not in said, (delay, said)
+        assert process.returncode in (0, 1, 130, -signal.SIGINT), (delay, process.returncode, said)
+
+
+def test_names_with_terminal_escapes_are_shown_escaped(tmp_path):
+    clip = tmp_path / "escape.bvh"
+    clip.write_bytes(CLIP.read_bytes().replace(b"JOINT lHand", b"JOINT l\x1b[2JHand", 1))
+    done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "info", str(clip), "--limbs"],
+                          capture_output=True, timeout=120)
+    assert b"\x1b" not in done.stdout and b"\x1b" not in done.stderr
+    done = run("exaggerate", clip, "-o", tmp_path / "out", "--target", "l\x1b[2JHand@9999", *FAST)
+    assert done.returncode == 2 and "\x1b" not in done.stderr and "\\x1b" in done.stderr, done.stderr
+
+
+def test_two_batches_into_one_folder_the_second_is_refused(tmp_path):
+    import time
+
+    folder = tmp_path / "in"
+    folder.mkdir()
+    for index in range(40):
+        (folder / f"clip{index}.bvh").write_bytes(CLIP.read_bytes())
+    out = tmp_path / "out"
+    first = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", str(folder), str(out),
+                              "-j", "1", "-q"], stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(out.glob("*.json")) and time.monotonic() < deadline:  # converting: a clip is done
+            time.sleep(0.05)
+        assert first.poll() is None
+        second = run("batch", folder, out, "-j", "1")
+        assert second.returncode == 2 and "another batch is writing into this folder" in second.stderr, second.stderr
+    finally:
+        _, said = first.communicate(timeout=300)
+    assert first.returncode == 0, said
+    assert run("batch", folder, out, "-j", "1", "--resume", "-q").returncode == 0  # free again once it ended
+
+
+def test_a_manifest_nested_a_million_deep_beside_a_clip_fails_nothing(tmp_path):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / "a.bvh").write_bytes(CLIP.read_bytes())
+    (folder / "a.json").write_text("[" * 1_000_000 + "]" * 1_000_000)
+    done = run("batch", folder, tmp_path / "out", "-j", "1", "--resume")
+    assert "Traceback" not in done.stderr and done.returncode in (0, 1), done.stderr
+
+
+def test_a_port_that_does_not_speak_dask_is_refused_within_ten_seconds(tmp_path):
+    import socket
+    import time
+
+    pytest.importorskip("distributed", reason="Dask distributed is not installed")
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(5)
+    port = listener.getsockname()[1]
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in" / "a.bvh").write_bytes(CLIP.read_bytes())
+    try:
+        start = time.monotonic()
+        done = run("batch", tmp_path / "in", tmp_path / "out", "--scheduler", f"tcp://127.0.0.1:{port}")
+        took = time.monotonic() - start
+    finally:
+        listener.close()
+    assert done.returncode == 2 and "did not answer as a Dask scheduler" in done.stderr, done.stderr
+    assert took < 10 + 5  # the greeting's 8 s and a start-up
+
+
+def test_a_star_of_many_links_shares_a_vertex_among_its_nearest_links_only():
+    from mocap_exaggerate import load_preset
+    from mocap_exaggerate.pipeline import run as pipeline_run
+    from mocap_exaggerate.rig import skinning
+
+    motion, _ = read_bvh(_star_bvh(300))
+    result = pipeline_run(motion, load_preset("cartoon"))
+    from mocap_exaggerate.jobs.outputs import base_skin
+
+    skin = base_skin(motion, result)
+    links = skinning._link_knots(motion.skeleton, result.hierarchy,
+                                 skinning.subjoint_bind_positions(motion.skeleton, result.hierarchy, skin.bind),
+                                 per_link=skin.per_link)
+    vertex = np.repeat(np.arange(skin.num_vertices), skin.joints.shape[1])
+    keep = skin.weights.ravel() > 0
+    original = np.array([motion.skeleton.index(n) for n in skin.joint_names])[skin.joints.ravel()][keep]
+    pair_entry, _ = skinning._pairs(skin.vertices[vertex[keep]], original, links)
+    assert len(pair_entry) <= skinning._NEAREST * len(original)  # quadratic before: 299 links for each
+    reweighted = skinning.reweight(skin, motion.skeleton, result.hierarchy)
+    assert np.all(np.isfinite(reweighted.weights)) and np.allclose(reweighted.weights.sum(axis=1), 1.0)
+
+
+def _star_bvh(count: int):
+    import math
+    import tempfile
+    from pathlib import Path
+
+    lines = ["HIERARCHY", "ROOT J0", "{", "OFFSET 0 0 0",
+             "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
+    for i in range(1, count):
+        angle = 2 * math.pi * i / count
+        lines += [f"JOINT J{i}", "{", f"OFFSET {math.cos(angle):.4f} {1 + (i % 7) * 0.1:.4f} {math.sin(angle):.4f}",
+                  "CHANNELS 3 Zrotation Xrotation Yrotation", "End Site", "{", "OFFSET 0 1 0", "}", "}"]
+    lines += ["}", "MOTION", "Frames: 6", "Frame Time: 0.0333333"]
+    lines += [" ".join(["0"] * 6 + [f"{(f * 3 + i) % 20}" for i in range(3 * (count - 1))]) for f in range(6)]
+    path = Path(tempfile.mkdtemp()) / "star.bvh"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_a_clip_over_the_size_limit_is_refused_before_it_is_read(monkeypatch):
+    import io
+
+    from mocap_exaggerate.core.errors import InputError
+    from mocap_exaggerate.io import files
+
+    with pytest.raises(InputError, match="is over"):
+        files.read_stream(io.BytesIO(b"x" * 101), limit=100, what="clip", label="<stdin>")
+    assert files.read_stream(io.BytesIO(b"x" * 100), limit=100, what="clip", label="<stdin>") == b"x" * 100
+
+
+def test_dask_workers_get_glibc_thresholds_back():
+    import os
+
+    from mocap_exaggerate.jobs import on_dask
+
+    pytest.importorskip("distributed", reason="Dask distributed is not installed")
+    if not os.path.exists("/lib/x86_64-linux-gnu/libc.so.6") and not os.path.exists("/usr/lib/libc.so.6"):
+        pytest.skip("not glibc")
+    done = subprocess.run([sys.executable, "-c", "from mocap_exaggerate.jobs.on_dask import malloc_thresholds as m; "
+                           "print(m(), m())"], env={**os.environ, "MALLOC_TRIM_THRESHOLD_": "65536"},
+                          capture_output=True, text=True, timeout=60)
+    assert done.stdout.split() == ["True", "True"], done.stderr
+    assert on_dask.malloc_thresholds() is False or "MALLOC_TRIM_THRESHOLD_" in os.environ  # nothing to do here

@@ -45,7 +45,9 @@ class Tuning:
     def post(self, body: bytes | dict, path: str = "run") -> tuple[int, dict]:
         data = body if isinstance(body, bytes) else json.dumps(body).encode()
         try:
-            with urllib.request.urlopen(urllib.request.Request(self.url + path, data=data, method="POST"), timeout=60) as r:
+            request = urllib.request.Request(self.url + path, data=data, method="POST",
+                                             headers={"Content-Type": "application/json"})
+            with urllib.request.urlopen(request, timeout=60) as r:
                 return r.status, json.loads(r.read())
         except urllib.error.HTTPError as error:
             return error.code, json.loads(error.read() or b"{}")
@@ -83,6 +85,7 @@ def test_a_run_the_page_asks_for_is_what_the_copied_command_writes(tuning, tmp_p
     assert status == 200, answer
     assert "--preset looney" in answer["command"] and "--set extrapolate.omega=6.0" in answer["command"]
     assert "--set springs.blend=0.55" in answer["command"] and "sigma" not in answer["command"]  # looney's own
+    assert answer["command"].count("--set") == 2  # the sliders moved, nothing else
     assert float(answer["notes"]["stretch"].rstrip("x")) > 1.0 and answer["seconds"] < 30
     assert written_glb(answer["command"], tmp_path / "a") == base64.b64decode(answer["glb"])
     # The options given hold for the first preset: --sigma 0.25s is where its slider starts.
@@ -96,11 +99,13 @@ def test_a_run_the_page_asks_for_is_what_the_copied_command_writes(tuning, tmp_p
 @pytest.mark.parametrize("body, code, says", [
     (b"not json", 400, "not JSON"),
     ({"preset": "wobbly"}, 400, "no preset 'wobbly'"),
-    ({"preset": "cartoon", "settings": {"extrapolate.omega": "lots"}}, 400, "settings must be an object of numbers"),
+    ({"preset": "cartoon", "settings": {"extrapolate.omega": "lots"}}, 400, "settings must be an object of finite numbers"),
     ({"preset": "cartoon", "settings": {"extrapolate.omega": -5}}, 400, "extrapolate.omega must be"),
     ({"preset": "cartoon", "settings": {"input.fps": 5}}, 400, "not a setting the tuner has"),
     (b"[" * 60_000, 400, "not JSON"),
     (b"x" * 100_000, 413, "small JSON object"),
+    (b'{"preset": "cartoon", "settings": {"subjoints.per_link": Infinity}}', 400, "finite numbers"),
+    (b'{"preset": "cartoon", "settings": {"extrapolate.omega": NaN}}', 400, "finite numbers"),
 ])
 def test_a_bad_request_is_answered_in_one_line_and_the_tuner_goes_on(tuning, body, code, says):
     status, answer = tuning.post(body)
@@ -145,3 +150,31 @@ def test_the_tuner_page_runs_a_slider_change_and_copies_a_command_that_writes_it
     page.context.close()
     # the tuner's own wall time for that run (the figure bench/preview.py prints on a longer clip)
     assert answer["seconds"] > 0 and time.time() > 0
+
+
+def test_a_request_from_elsewhere_is_refused(tuning):
+    # A page on another site can post text/plain without asking first, or reach in through a name of its
+    # own that resolves here (DNS rebinding): neither runs anything.
+    port = tuning.url.rsplit(":", 1)[1].strip("/")
+    body = json.dumps({"preset": "cartoon", "settings": {}}).encode()
+    for headers, code in (({"Content-Type": "text/plain"}, 415), ({"Content-Type": "application/json",
+                                                                  "Host": f"evil.example:{port}"}, 403)):
+        request = urllib.request.Request(tuning.url + "run", data=body, method="POST", headers=headers)
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(request, timeout=30)
+        assert refused.value.code == code
+
+
+def test_a_setting_from_a_pipeline_file_in_frames_is_run_and_copied_as_read(tmp_path):
+    # The review's case: sigma "7f" in a --config file was run as 0.058333 s and copied as "7f".
+    config = tmp_path / "f7.toml"
+    config.write_text('[extrapolate]\nsigma = "7f"\n')
+    server = Tuning("--config", str(config), "--stiffness", "158")
+    try:
+        status, answer = server.post({"preset": "cartoon", "settings": {"extrapolate.omega": 5.1}})
+        assert status == 200, answer
+        assert "sigma" not in answer["command"] and "--stiffness 158" not in answer["command"]
+        assert "--set springs.stiffness=158.0" in answer["command"]  # given on the command line: set as given
+        assert written_glb(answer["command"], tmp_path / "out") == base64.b64decode(answer["glb"])
+    finally:
+        server.stop()

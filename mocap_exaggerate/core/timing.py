@@ -73,6 +73,8 @@ def parse_frame(value: str | float | int, frame_time: float, *, what: str) -> in
         return int(value)
     text = str(value).strip()
     if re.fullmatch(r"\d+", text):
+        if len(text) > 18:  # (past any clip; Python will not read an integer over 4,300 digits)
+            raise ConfigError(f"{what} {text[:20]}... ({len(text)} digits) is past the end of any clip")
         return int(text)
     if not re.search(r"(s|ms|f|frames?)$", text):
         raise ConfigError(f"{what} must be a frame number or a time such as 1.2s, got {value!r}")

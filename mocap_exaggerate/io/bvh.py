@@ -54,9 +54,13 @@ MAX_VALUE = 1e9
 #: 10,000 fps is a wrong header, not a clip.
 FPS_RANGE = (1.0, 10000.0)
 #: Deepest hierarchy and most joints read: deeper chains are not skeletons, and every
-#: stage's cost grows with them.
+#: stage's cost grows with them. A character with a face and fingers has a few hundred; a
+#: 2,000-joint star converts in about 6 s (10,000 took 30 s, and before issue 28 never ended).
 MAX_DEPTH = 1000
-MAX_JOINTS = 10000
+MAX_JOINTS = 2000
+#: Most frames read: 500,000 is 69 minutes at 120 fps, past any take; a run holds about 18 kB a frame
+#: of a 31-joint rig, so a longer clip is cut into takes first (refused in one line before any work).
+MAX_FRAMES = 500_000
 
 #: How position channels are read (see `read_bvh`), and the up axes one can give.
 ROOT_OFFSET_MODES = ("auto", "replace", "add")
@@ -159,12 +163,17 @@ def read_bvh(
             m = _FRAMES_RE.match(line)
             if not m:
                 raise InputError(f"expected 'Frames: <count>', found {line.strip()!r}", source=label, line=line_no)
+            count = m.group(1)
             try:
-                declared_frames = int(m.group(1))
+                declared_frames = int(count) if len(count) <= 18 else MAX_FRAMES + 1
             except ValueError:
-                raise InputError(f"frame count {m.group(1)!r} is not a whole number", source=label, line=line_no) from None
+                raise InputError(f"frame count {count[:20]!r} is not a whole number", source=label, line=line_no) from None
             if declared_frames < 0:
                 raise InputError(f"frame count {declared_frames} is negative", source=label, line=line_no)
+            if declared_frames > MAX_FRAMES:
+                shown = count if len(count) <= 20 else f"{count[:20]}... ({len(count)} digits)"
+                raise InputError(f"'Frames: {shown}': at most {MAX_FRAMES:,} frames are read (cut the take into "
+                                 f"shorter clips)", source=label, line=line_no)
             frames_line = line_no
         else:
             m = _FRAME_TIME_RE.match(line)
@@ -275,17 +284,18 @@ def read_source(source, name: str | None = None) -> tuple[bytes, str]:
     """The bytes of a path, ``"-"`` (standard input), bytes or a binary stream, and how to name it in messages."""
     if isinstance(source, (bytes, bytearray)):
         return bytes(source), name or "<bytes>"
+    from .files import LIMITS, read_limited, read_stream
+
     if hasattr(source, "read"):
-        data = source.read()
-        if isinstance(data, str):
-            data = data.encode("utf-8")
-        return data, name or getattr(source, "name", "<stream>")
+        label = name or getattr(source, "name", "<stream>")
+        return read_stream(source, limit=LIMITS["clip"], what="clip", label=str(label)), label
     if str(source) == "-":
-        return sys.stdin.buffer.read(), name or "<stdin>"
+        label = name or "<stdin>"
+        return read_stream(sys.stdin.buffer, limit=LIMITS["clip"], what="clip", label=label), label
     path = Path(source)
     label = name or str(path)
     try:
-        return path.read_bytes(), label
+        return read_limited(path, limit=LIMITS["clip"], what="BVH file", label=label), label
     except IsADirectoryError:
         raise InputError("is a folder, not a BVH file", source=label) from None
     except FileNotFoundError:

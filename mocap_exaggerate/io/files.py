@@ -5,13 +5,57 @@ from __future__ import annotations
 import glob
 import hashlib
 import os
+import stat
 import tempfile
 from pathlib import Path
 
-from ..core.errors import MocapError
+from ..core.errors import InputError, MocapError
 
 __all__ = ["OutputExistsError", "OutputSet", "atomic_write", "write_files", "same_file", "remove_stale_temporaries",
-           "digest_of", "digest_of_file"]
+           "digest_of", "digest_of_file", "read_limited", "read_stream", "regular_file", "LIMITS"]
+
+#: The largest file of each kind read, in bytes: a clip (a 500,000-frame take of a 100-joint rig is about
+#: 0.6 GB of text), a character (a skin, a glTF), and any small text (a pipeline file, a joint map, a
+#: trails file, a manifest, MakeHuman's weights). Past it, one line and nothing read: a file of zeros or a
+#: zip bomb once read until memory ran out.
+LIMITS = {"clip": 1 << 30, "character": 1 << 30, "text": 64 << 20}
+
+
+def _size(count: int) -> str:
+    return f"{count / (1 << 30):.3g} GiB" if count >= 1 << 30 else f"{count / (1 << 20):.3g} MiB"
+
+
+def regular_file(path: str | os.PathLike, *, what: str, label: str | None = None) -> os.stat_result:
+    """The ``os.stat`` of ``path`` (links followed) when it is a regular file; InputError naming what it is
+    otherwise (a folder, a FIFO, a device: reading a FIFO or /dev/zero blocks or never ends). OSError
+    (no such file, permission) as ``os.stat`` raises it."""
+    info = os.stat(path)
+    if not stat.S_ISREG(info.st_mode):
+        kind = ("a folder" if stat.S_ISDIR(info.st_mode) else "a FIFO" if stat.S_ISFIFO(info.st_mode)
+                else "a device" if stat.S_ISCHR(info.st_mode) or stat.S_ISBLK(info.st_mode)
+                else "a socket" if stat.S_ISSOCK(info.st_mode) else "not a regular file")
+        raise InputError(f"is {kind}, not a {what}", source=label or str(path))
+    return info
+
+
+def read_limited(path: str | os.PathLike, *, limit: int, what: str, label: str | None = None) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes (`regular_file`); InputError past it."""
+    label = label or str(path)
+    info = regular_file(path, what=what, label=label)
+    if info.st_size > limit:
+        raise InputError(f"is {_size(info.st_size)}; a {what} is read up to {_size(limit)}", source=label)
+    with open(path, "rb") as stream:
+        return read_stream(stream, limit=limit, what=what, label=label)
+
+
+def read_stream(stream, *, limit: int, what: str, label: str) -> bytes:
+    """At most ``limit`` bytes of a binary stream (standard input); InputError when there are more."""
+    data = stream.read(limit + 1)
+    if isinstance(data, str):
+        data = data.encode("utf-8")
+    if len(data) > limit:
+        raise InputError(f"is over {_size(limit)}; a {what} is read up to {_size(limit)}", source=label)
+    return data
 
 
 def digest_of(data: bytes | list[bytes]) -> str:
@@ -23,7 +67,12 @@ def digest_of(data: bytes | list[bytes]) -> str:
 
 
 def digest_of_file(path: str | os.PathLike) -> str:
-    """``sha256:<hex>`` of a file's bytes, read in pieces (a long clip is not held twice); OSError as opening raises it."""
+    """``sha256:<hex>`` of a file's bytes, read in pieces (a long clip is not held twice); OSError as opening raises
+    it, and for what is not a regular file (a FIFO would block, a device never end)."""
+    import errno
+
+    if not stat.S_ISREG(os.stat(path).st_mode):
+        raise OSError(errno.EINVAL, "not a regular file", str(path))
     with open(path, "rb") as stream:
         return "sha256:" + hashlib.file_digest(stream, "sha256").hexdigest()
 

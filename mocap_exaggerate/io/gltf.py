@@ -129,7 +129,7 @@ def _weights_for_gltf(weights: np.ndarray) -> np.ndarray:
     """float32 weights whose rows sum to 1 after the cast (the validator checks it)."""
     w = weights.astype(np.float32)
     total = w.sum(axis=1, keepdims=True)
-    w = np.where(total > 0, w / total, w).astype(np.float32)
+    w = np.divide(w, total, out=w.copy(), where=total > 0).astype(np.float32)
     strongest = np.argmax(w, axis=1)
     rest = w.sum(axis=1) - w[np.arange(len(w)), strongest]
     w[np.arange(len(w)), strongest] = (np.float32(1.0) - rest).astype(np.float32)

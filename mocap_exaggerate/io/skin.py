@@ -12,6 +12,7 @@ import os
 import struct
 import urllib.parse
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..core.rotations import quat_to_matrix
 from ..rig.skinning import Skin, top_influences
+from .files import LIMITS, read_limited, regular_file
 
 __all__ = ["load_skin", "check_skin", "load_npz_skin", "load_gltf_skin", "load_makehuman_skin", "npz_bytes", "open_gltf"]
 
@@ -28,10 +30,19 @@ def load_npz_skin(path: str | os.PathLike) -> Skin:
     ``(V, K)`` or dense weights ``(V, J)``."""
     label = str(path)
     try:
+        regular_file(path, what=".npz skin", label=label)
+        with zipfile.ZipFile(path) as archive:  # the members' sizes, as the archive declares them, first
+            declared = sum(member.file_size for member in archive.infolist())
+        if declared > LIMITS["character"]:
+            raise InputError(f"unpacks to {declared / (1 << 30):.3g} GiB; a skin is read up to "
+                             f"{LIMITS['character'] >> 30} GiB", source=label)
         with np.load(path, allow_pickle=False) as archive:
             data = {name: archive[name] for name in archive.files}  # read now: a bad CRC shows here
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as error:
-        raise InputError(f"not a readable .npz skin ({error})", source=label) from None
+    except InputError:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error, MemoryError) as error:
+        # (a member's header may declare more than its bytes: numpy's MemoryError before it reads them)
+        raise InputError(f"not a readable .npz skin ({type(error).__name__}: {str(error)[:120]})", source=label) from None
     missing = {"vertices", "faces", "joint_names", "weights"} - set(data)
     if missing:
         raise InputError(f"skin .npz lacks {', '.join(sorted(missing))}", source=label)
@@ -60,9 +71,10 @@ def load_makehuman_skin(obj_path: str | os.PathLike, weights_path: str | os.Path
         weights_path = found[0]
     vertices, faces = _read_obj_group(obj_path, "body")
     try:
-        table = json.loads(Path(weights_path).read_text(encoding="utf-8"))["weights"]
-    except (OSError, ValueError, KeyError) as error:
-        raise InputError(f"not a MakeHuman weights file ({error})", source=str(weights_path)) from None
+        table = json.loads(read_limited(Path(weights_path), limit=LIMITS["text"], what="MakeHuman weights file")
+                           .decode("utf-8"))["weights"]
+    except (OSError, ValueError, KeyError, TypeError, RecursionError) as error:
+        raise InputError(f"not a MakeHuman weights file ({type(error).__name__})", source=str(weights_path)) from None
     used = np.unique(faces)
     remap = np.full(len(vertices), -1)
     remap[used] = np.arange(len(used))
@@ -80,7 +92,12 @@ def load_makehuman_skin(obj_path: str | os.PathLike, weights_path: str | os.Path
     skeleton_files = sorted(obj_path.parent.glob("*.mhskel"))
     if skeleton_files:
         # Bone heads in the mesh's own (A-)pose: each joint is the mean of its vertex group.
-        rig = json.loads(skeleton_files[0].read_text(encoding="utf-8"))
+        try:
+            rig = json.loads(read_limited(skeleton_files[0], limit=LIMITS["text"], what="MakeHuman skeleton file")
+                             .decode("utf-8"))
+        except (OSError, ValueError, RecursionError) as error:
+            raise InputError(f"not a MakeHuman skeleton file ({type(error).__name__})",
+                             source=str(skeleton_files[0])) from None
         for name, bone in rig.get("bones", {}).items():
             group = rig.get("joints", {}).get(bone.get("head"), [])
             if group:
@@ -93,7 +110,7 @@ def load_makehuman_skin(obj_path: str | os.PathLike, weights_path: str | os.Path
 def _read_obj_group(path: Path, group: str) -> tuple[np.ndarray, np.ndarray]:
     """All vertices and the triangulated faces of one group of an OBJ file."""
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        text = read_limited(path, limit=LIMITS["character"], what="OBJ file").decode("utf-8", errors="replace")
     except OSError as error:
         raise InputError(f"cannot read ({error.strerror})", source=str(path)) from None
     vertices, faces = [], []
@@ -120,6 +137,12 @@ def open_gltf(path: str | os.PathLike):
     import pygltflib as gl
 
     label = str(path)
+    try:
+        regular_file(path, what="glTF file", label=label)
+        if os.stat(path).st_size > LIMITS["character"]:
+            raise InputError(f"is over {LIMITS['character'] >> 30} GiB; a character is read up to that", source=label)
+    except OSError as error:
+        raise InputError(f"cannot read ({error.strerror or error})", source=label) from None
     try:
         gltf = gl.GLTF2().load(str(path))
     except Exception as error:  # pygltflib raises many kinds on bad files
@@ -517,9 +540,9 @@ def _read_skin(path: str | os.PathLike) -> Skin:
     loaders = {".npz": load_npz_skin, ".glb": load_gltf_skin, ".gltf": load_gltf_skin, ".obj": load_makehuman_skin}
     if suffix not in loaders:
         raise InputError("skins are read from .npz, .glb/.gltf or a MakeHuman .obj (+ .mhw)", source=label)
-    if not Path(path).is_file():
-        raise InputError("no such skin file" if not Path(path).exists() else "is a folder, not a skin file",
-                         source=label)
+    if not Path(path).exists():
+        raise InputError("no such skin file", source=label)
+    regular_file(path, what="skin file", label=label)  # a folder, a FIFO, a device: said, not read
     try:
         skin = loaders[suffix](path)
     except InputError:

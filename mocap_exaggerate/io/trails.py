@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
+from .files import LIMITS, read_limited
 
 __all__ = ["format_trails", "read_trails"]
 
@@ -28,13 +29,17 @@ def read_trails(path: str | os.PathLike) -> dict[str, tuple[list[int], np.ndarra
     """Edited paths from a trails file: limb -> (frames, points ``(n, 3)``)."""
     label = str(path)
     try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
+        data = json.loads(read_limited(Path(path), limit=LIMITS["text"], what="trails file", label=label).decode("utf-8"))
     except FileNotFoundError:
         raise InputError("no such path file", source=label) from None
     except IsADirectoryError:
         raise InputError("is a folder, not a trails file", source=label) from None
     except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:
         raise InputError(f"not a JSON trails file ({error})", source=label) from None
+    except InputError:
+        raise
+    except ValueError:  # an integer of more than 4,300 digits (Python's own limit)
+        raise InputError("not a trails file: a number of more than 4,300 digits", source=label) from None
     trails = data.get("trails", []) if isinstance(data, dict) else []
     if not isinstance(trails, list):
         raise InputError("'trails' must be a list of trails", source=label)

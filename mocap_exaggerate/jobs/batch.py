@@ -33,7 +33,9 @@ Example::
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
 
 from ..core.errors import ConfigError
 from .batch_types import BatchInterrupted, BatchOptions, Clip, FileResult
@@ -59,8 +61,14 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
     the same bytes whichever way they ran. A clip whose name no output can have,
     or whose outputs would replace another clip or its outputs, fails alone before
     anything runs. Ctrl-C (KeyboardInterrupt) lets the clips being converted
-    finish, starts no more, and raises `BatchInterrupted`; so does a lost scheduler.
+    finish, starts no more, and raises `BatchInterrupted`; so does a lost scheduler. A second batch
+    into the same folder while this one runs is refused (`batch_lock`).
     """
+    with batch_lock(out_dir):
+        return _run_batch(clips, out_dir, options, jobs, on_result, scheduler)
+
+
+def _run_batch(clips, out_dir, options, jobs, on_result, scheduler) -> list[FileResult]:
     from .job import check_name
 
     parameters = batch_parameters(options)
@@ -102,3 +110,28 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
     except SchedulerLost as lost:
         raise BatchInterrupted(in_order(), waiting(), reason=str(lost)) from None
     return in_order()
+
+
+@contextmanager
+def batch_lock(out_dir: str | os.PathLike) -> Iterator[None]:
+    """Hold the output folder for this batch: a second batch into the same folder (by its real path) is
+    refused in one line while the first runs (each clears the other's temporaries as an earlier run's
+    leftovers otherwise). The lock is a file in the system's temporary folder, released when the batch
+    ends or its process does; batches on other machines sharing the folder are not seen."""
+    import fcntl
+    import hashlib
+    import tempfile
+
+    real = os.path.realpath(out_dir)
+    name = hashlib.sha256(os.fsencode(real)).hexdigest()[:24]
+    path = Path(tempfile.gettempdir()) / f"mocap-exaggerate-batch-{name}.lock"
+    handle = open(path, "a+b")
+    try:
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ConfigError(f"{out_dir}: another batch is writing into this folder; wait for it to end, or "
+                              "choose another output folder") from None
+        yield
+    finally:
+        handle.close()  # (closing releases the lock)

@@ -166,12 +166,15 @@ def check_folders(in_dir: str | os.PathLike, out_dir: str | os.PathLike, pattern
 
 def read_manifest(path: str | os.PathLike) -> dict | None:
     """The manifest at ``path`` as data; None when there is none or it does not read as one."""
+    import stat
+
     path = Path(path)
     try:
-        if path.stat().st_size > 50_000_000:
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode) or info.st_size > 50_000_000:  # (a FIFO named <clip>.json blocked)
             return None
         info = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # (a manifest nested a million deep stopped a whole batch)
         return None
     return info if isinstance(info, dict) and info.get("tool") == "mocap_exaggerate" else None
 

@@ -548,12 +548,15 @@ def check_output_set(manifest: str | os.PathLike, info: dict | None = None) -> l
     """
     manifest = Path(manifest)
     try:
-        info = json.loads(manifest.read_text(encoding="utf-8")) if info is None else info
+        if info is None:
+            from ..io.files import LIMITS, read_limited
+
+            info = json.loads(read_limited(manifest, limit=LIMITS["text"], what="manifest").decode("utf-8"))
         hashes = dict(info["outputs"]["hashes"])
         names = {kind: str(info["outputs"][kind]) for kind in hashes}
     except FileNotFoundError:
         return [f"{manifest}: no manifest"]
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError) as error:
         return [f"{manifest}: not a readable manifest ({type(error).__name__})"]
     problems = []
     for kind, digest in hashes.items():

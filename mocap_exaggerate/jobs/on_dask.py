@@ -22,7 +22,8 @@ from .discovery import largest_first, source_size
 from .pool import one_thread_per_worker
 from .task import clear_temporaries, convert_file
 
-__all__ = ["check_scheduler", "connect_dask", "run_on_dask", "SchedulerLost", "WAIT_FOR_WORKERS"]
+__all__ = ["check_scheduler", "connect_dask", "run_on_dask", "convert_on_worker", "malloc_thresholds", "SchedulerLost",
+           "WAIT_FOR_WORKERS"]
 
 #: Seconds a batch waits for a Dask scheduler without workers to get one.
 WAIT_FOR_WORKERS = 30.0
@@ -33,14 +34,30 @@ class SchedulerLost(Exception):
 
 
 def check_scheduler(scheduler: str) -> None:
-    """Refuse (ConfigError) a ``scheduler`` that is neither ``local`` nor a Dask address, or Dask missing."""
-    if scheduler != "local" and not re.fullmatch(r"(tcp|tls|ws|wss|inproc|ucx)://\S+", scheduler):
-        shown = repr(scheduler) if len(scheduler) <= 80 else f"{scheduler[:80]!r}... ({len(scheduler)} characters)"
-        raise ConfigError(f"--scheduler {shown}: give 'local' or a Dask scheduler's address such as tcp://host:8786")
+    """Refuse (ConfigError) a ``scheduler`` that is neither ``local`` nor a Dask address this command can reach
+    (a host and a port over tcp, ws or wss; tls only with Dask's TLS settings configured), or Dask missing."""
+    shown = repr(scheduler) if len(scheduler) <= 80 else f"{scheduler[:80]!r}... ({len(scheduler)} characters)"
+    if scheduler != "local":
+        found = re.fullmatch(r"(tcp|tls|ws|wss|inproc|ucx)://(\[[0-9A-Fa-f:.]+\]|[^\s/:\[\]]+):(\d{1,5})/?", scheduler)
+        if found is None or not 0 < int(found.group(3)) < 65536:
+            raise ConfigError(f"--scheduler {shown}: give 'local' or a Dask scheduler's address with its port, "
+                              "such as tcp://host:8786")
+        if found.group(1) == "inproc":
+            raise ConfigError(f"--scheduler {shown}: an inproc:// scheduler lives in another process's memory; "
+                              "give its tcp:// address")
+        if found.group(1) == "ucx":
+            raise ConfigError(f"--scheduler {shown}: ucx:// needs UCX, which this command does not set up; "
+                              "give the scheduler's tcp:// address")
     try:
         import distributed  # noqa: F401
     except ImportError:
         raise ConfigError("--scheduler needs Dask distributed: pip install 'mocap-exaggerate[dask]'") from None
+    if scheduler.startswith("tls://"):
+        import dask
+
+        if not dask.config.get("distributed.comm.tls.client.cert", None):
+            raise ConfigError(f"--scheduler {shown}: tls:// needs Dask's TLS certificates configured "
+                              "(distributed.comm.tls.client.cert and .key; see Dask's security docs)")
 
 
 def connect_dask(scheduler: str, jobs: int = 1):
@@ -54,8 +71,14 @@ def connect_dask(scheduler: str, jobs: int = 1):
     from distributed import Client, LocalCluster
 
     if scheduler == "local":
+        import dask
+
         try:
-            with one_thread_per_worker():
+            # Dask's nanny starts each worker with MALLOC_TRIM_THRESHOLD_=65536, which turns glibc's
+            # adaptive thresholds off: every large NumPy temporary became fresh pages from the kernel and
+            # each clip took 1.9-2.0x as long as in the pool. Unset, the workers allocate as -j does.
+            with one_thread_per_worker(), dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_":
+                                                             None}):
                 cluster = LocalCluster(n_workers=max(jobs, 1), threads_per_worker=1, processes=True,
                                        dashboard_address=None, silence_logs=logging.ERROR)
         except KeyboardInterrupt:
@@ -68,6 +91,8 @@ def connect_dask(scheduler: str, jobs: int = 1):
         except BaseException:
             cluster.close()
             raise
+    if scheduler.startswith("tcp://"):
+        _speaks_dask(scheduler)
     try:
         client = Client(scheduler, timeout=10)
     except (OSError, TimeoutError) as error:
@@ -82,6 +107,32 @@ def connect_dask(scheduler: str, jobs: int = 1):
         client.close()
         raise
     return client, None
+
+
+#: Seconds a scheduler has to greet a connection, as a Dask scheduler does at once.
+GREETING = 8.0
+
+
+def _speaks_dask(scheduler: str) -> None:
+    """Refuse (ConfigError) a tcp:// address where nothing listens or what listens does not greet a connection
+    within `GREETING` seconds as a Dask scheduler does (its handshake comes first): Dask's own client waits on
+    such a port for ever (a web server, a database)."""
+    import socket
+
+    host, port = scheduler[len("tcp://"):].rstrip("/").rsplit(":", 1)
+    host = host.strip("[]")
+    try:
+        with socket.create_connection((host, int(port)), timeout=GREETING) as probe:
+            probe.settimeout(GREETING)
+            first = probe.recv(1)
+    except TimeoutError:
+        raise ConfigError(f"--scheduler {scheduler}: what listens there did not answer as a Dask scheduler "
+                          f"within {GREETING:g} s") from None
+    except OSError as error:
+        raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: "
+                          f"{error.strerror or error}") from None
+    if not first:
+        raise ConfigError(f"--scheduler {scheduler}: what listens there closed the connection; not a Dask scheduler")
 
 
 def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptions, parameters: str, *,
@@ -104,7 +155,7 @@ def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOpt
 
         for index, clip in enumerate(largest_first(clips)):
             task = Clip(Path(os.path.abspath(clip.source)), clip.relative)
-            future = client.submit(convert_file, task, out_abs, options, parameters, str(clip.source),
+            future = client.submit(convert_on_worker, task, out_abs, options, parameters, str(clip.source),
                                    pure=False, priority=source_size(clip),
                                    key=f"mocap-exaggerate-{index}-{os.getpid()}-{time.monotonic_ns()}")
             futures[future] = clip
@@ -129,6 +180,39 @@ def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOpt
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def convert_on_worker(*args) -> FileResult:
+    """`convert_file` on a Dask worker, glibc's memory thresholds first set for the worker's process where
+    its nanny turned them off (`malloc_thresholds`): a cluster this tool did not start runs at the pool's speed."""
+    malloc_thresholds()
+    return convert_file(*args)
+
+
+#: glibc's ``mallopt`` parameters, and the thresholds its adaptive rule reaches at most on 64 bits:
+#: memory under 32 MiB comes from the heap and is kept, up to 64 MiB free at its top.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_MMAP_MOST, _TRIM_MOST = 32 << 20, 64 << 20
+_SET: list[bool] = []
+
+
+def malloc_thresholds() -> bool:
+    """Where ``MALLOC_TRIM_THRESHOLD_`` (or ``MALLOC_MMAP_THRESHOLD_``) fixed glibc's thresholds for this
+    process (Dask's nanny sets 65536), set them once to the most its adaptive rule would reach, so that
+    large temporaries reuse the heap instead of faulting in fresh pages; whether they were set. Not
+    glibc (or not Linux): nothing."""
+    if _SET or not any(name in os.environ for name in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_")):
+        return bool(_SET and _SET[0])
+    done = False
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        done = bool(libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_MOST)) and bool(libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_MOST))
+    except (OSError, AttributeError):
+        done = False
+    _SET.append(done)
+    return done
 
 
 def _given(path: str, out_abs: Path, out_dir) -> str:

@@ -229,9 +229,11 @@ def read_joint_map(path) -> dict[str, str]:
     """
     from pathlib import Path
 
+    from ..io.files import LIMITS, read_limited
+
     label = str(path)
     try:
-        text = Path(path).read_bytes().decode("utf-8-sig")
+        text = read_limited(Path(path), limit=LIMITS["text"], what="joint map file", label=label).decode("utf-8-sig")
     except FileNotFoundError:
         raise InputError("no such joint map file", source=label) from None
     except IsADirectoryError:

@@ -136,6 +136,14 @@ def _layout(count: int, columns: int) -> list[tuple[int, int]]:
     return [(0, 0)] + [(1 + k // columns, k % columns) for k in range(count - 1)]
 
 
+def _label_width(labels: list[tuple[str, str]]) -> int:
+    """Pixels the widest cell's two label lines need (a cell is at least this wide: labels ran into their
+    neighbours and past the picture's edge)."""
+    from .raster import font
+
+    return int(math.ceil(max(max(font(12).getlength(a), font(10).getlength(b)) for a, b in labels))) + 10
+
+
 def _labels(ran: list[Ran]) -> list[tuple[str, str]]:
     lines = [("captured", "the motion as read")]
     for r in ran:
@@ -167,7 +175,8 @@ def render_grid_png(motion: Motion, ran: list[Ran], *, columns: int, frames: int
     half, low, high = view_limits(bodies.points(), bodies.root[:, right])
     scale = column_px / (2.0 * half)
     row_px = max(int(round((high - low) * scale)), 16)
-    strip = len(picks) * column_px
+    strip = max(len(picks) * column_px, _label_width(_labels(ran)))
+    inset = (strip - len(picks) * column_px) / 2.0  # the frames in the middle of a strip widened for its label
     gap, margin, top = 40, 8, 24
     places = _layout(len(bodies.vertices), columns)
     rows = 1 + max(r for r, _ in places)
@@ -175,14 +184,15 @@ def render_grid_png(motion: Motion, ran: list[Ran], *, columns: int, frames: int
     width = 2 * margin + grid_columns * strip + (grid_columns - 1) * gap
     height = top + rows * (LABEL_ROWS + row_px) + (rows - 1) * gap + margin
     canvas = Canvas(1, height, width)
-    texts = [(width / 2, 4, f"{len(ran)} settings side by side, frames {', '.join(str(p) for p in picks)}", 13,
+    texts = [(width / 2, 4, f"{len(ran)} settings side by side, frame{'s' if len(picks) > 1 else ''} "
+                           f"{', '.join(str(p) for p in picks)}", 13,
               (30, 30, 30), "mt")]
     everything = np.zeros(len(picks), dtype=np.int64)
     for (row, column), vertices, faces, colour, face, (label, figures) in zip(
             places, bodies.vertices, bodies.faces, bodies.colours, bodies.facing, _labels(ran)):
         left = margin + column * (strip + gap)
         y = top + row * (LABEL_ROWS + row_px + gap)
-        lefts = left + column_px * np.arange(len(picks), dtype=np.float64)
+        lefts = left + inset + column_px * np.arange(len(picks), dtype=np.float64)
         draw_body(canvas, everything, vertices, faces, bodies.axes, colour, lefts, y + LABEL_ROWS, scale,
                   bodies.root[:, right] - half, high, face)
         texts += [(left + strip / 2, y, label, 12, (30, 30, 30), "mt"),
@@ -204,7 +214,7 @@ def render_grid_frames(motion: Motion, ran: list[Ran], frames: np.ndarray, *, co
     centre = camera_centres(bodies.root[:, right], points, tall, max(0.4 / shown, 1.0))
     half, low, high = view_limits(points, centre)
     panel_h = max(int(cell_px), 16)
-    panel_w = math.ceil(panel_h * 2.0 * half / (high - low))
+    panel_w = max(math.ceil(panel_h * 2.0 * half / (high - low)), _label_width(_labels(ran)))
     half = 0.5 * panel_w / panel_h * (high - low)
     scale = panel_h / (high - low)
     places = _layout(len(bodies.vertices), columns)
@@ -284,6 +294,10 @@ def write_compare(source, output: str | os.PathLike, cells: list[Cell], *, colum
     if len(cells) > MAX_CELLS:
         raise ConfigError(f"{len(cells)} settings to compare; at most {MAX_CELLS} (each is a run of the pipeline)")
     config = config or cells[0].config
+    from ..io.gltf_motion import is_gltf
+
+    if is_gltf(source) and skin is None and not config.glb.skin:
+        skin = Path(source)  # a game character is drawn with its own mesh, as exaggerate writes it
     character = Character.of(config.glb, glb=True, skin=skin, joint_map=joint_map, units=None, influences=None)
     inputs = [Path(p) for p in (source, character.skin_file, character.map_file)
               if isinstance(p, (str, os.PathLike)) and str(p) != "-"]

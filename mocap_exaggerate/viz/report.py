@@ -59,7 +59,14 @@ def write_pictures(record, out_dir: str | os.PathLike, config=None) -> dict:
     info = {"bvh": record.manifest["outputs"]["hashes"]["bvh"], "joint": motion.skeleton.names[joint],
             "frames": frames, "window": list(window), "preview": paths["preview"].name,
             "trajectory": paths["trajectory"].name, "page": paths["page"].name}
-    page = run_page(motion, result, config, label="exaggerated", title=Path(record.outputs["manifest"]).stem)
+    skin, units = None, "auto"
+    if config is not None:  # the page plays the batch's own character, as its GLB holds it
+        from ..jobs.job import Character
+
+        character = Character.of(config.glb, glb=True, skin=None, joint_map=None, units=None, influences=None)
+        skin, units = character.bound_to(motion, str(record.outputs["manifest"]))[0], config.glb.units
+    page = run_page(motion, result, config, label="exaggerated", title=Path(record.outputs["manifest"]).stem, skin=skin,
+                    units=units)
     write_files([(paths["preview"], render_preview(motion, result, at=frames, width=1.8, dpi=110)),
                  (paths["trajectory"], render_trajectory(motion, result, joint, config, frames=window, dpi=100,
                                                           world=world)),
@@ -107,7 +114,7 @@ def check_report(out_dir: str | os.PathLike) -> None:
 def _read_json(path: Path) -> dict | None:
     try:
         value = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     return value if isinstance(value, dict) else None
 
@@ -220,8 +227,11 @@ def _href(out_dir: Path, path) -> str:
 
 
 def _e(text) -> str:
-    """``text`` for the page: HTML-escaped, a name that is not UTF-8 shown with its odd bytes replaced."""
-    return html.escape(str(text).encode("utf-8", "surrogateescape").decode("utf-8", "replace"), quote=True)
+    """``text`` for the page: HTML-escaped, a name that is not UTF-8 shown with its odd bytes replaced,
+    control characters as Python writes them (``\\x1b``)."""
+    text = str(text).encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+    text = "".join(c if c.isprintable() or c in " \t" else repr(c)[1:-1] for c in text)
+    return html.escape(text, quote=True)
 
 
 _PAGE = """<!DOCTYPE html>

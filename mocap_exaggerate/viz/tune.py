@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import base64
 import json
+import math
 import shlex
 import threading
 import time
@@ -21,7 +22,7 @@ from pathlib import Path
 
 from ..core.errors import ConfigError, MocapError
 
-__all__ = ["TUNED", "Slider", "Tuner", "serve", "TuneServer", "slider_values"]
+__all__ = ["TUNED", "Slider", "Tuner", "serve", "bind_port", "TuneServer", "slider_values"]
 
 
 @dataclass(frozen=True)
@@ -93,7 +94,8 @@ class Tuner:
     configure : ``preset -> PipelineConfig``, the config the command line's other options make with that
         preset (``--config``, ``--skin``, ``--fps``, switches; not the sliders' settings); ``base`` those
         options' words, kept in every command
-    start : sliders' values the command line gave (``--sigma 0.3s``), where they start with ``preset``
+    start : the sliders' values the command line gave (``--sigma 0.3s``, ``--set springs.blend=0.5``): where
+        they start with ``preset``, and set in every run and command of it
     skin : the character drawn (bound to the clip), None for the default body
     """
 
@@ -125,6 +127,10 @@ class Tuner:
             values.update({key: value for key, value in self.given.items() if key in _BY_KEY})
         return values
 
+    def applied(self, preset: str, values: dict[str, object]) -> dict[str, object]:
+        """What a run sets: the sliders moved (``values``), over the command line's own for the first preset."""
+        return {**(self.given if preset == self.preset else {}), **values}
+
     def _config(self, preset: str, values: dict[str, object]):
         from ..config import resolve_config
 
@@ -140,23 +146,23 @@ class Tuner:
 
     def command(self, preset: str, values: dict[str, object]) -> str:
         """The ``exaggerate`` command that writes what the page shows (the GLB byte for byte): the preset,
-        the other options given, and ``--set`` for each slider away from where they put it."""
-        own = self._own(preset)
+        the other options given, and ``--set`` for each setting the run set (`applied`), written as the run
+        read it (a slider left alone is not set: a "7f" from a pipeline file stays "7f")."""
         words = ["mocap-exaggerate", "exaggerate", self.source, "-o", "out", "--preset", preset, *self.base]
         for key, value in values.items():
-            if key in _BY_KEY and _written(key, value) != _written(key, own[key]):
-                words += ["--set", f"{key}={_written(key, value)}"]
+            words += ["--set", f"{key}={_written(key, value)}"]
         return shlex.join(words)
 
     def start(self) -> dict:
         """The page's ``tune`` (`mocap_exaggerate.viz.page.page_html`): presets, sliders, the command and TOML."""
         values = self.settings(self.preset)
-        config = self._config(self.preset, values)
+        config = self._config(self.preset, self.applied(self.preset, {}))
         presets = [{"name": name, "settings": self.settings(name)} for name in self.presets]
         sliders = [{"key": s.key, "label": s.label, "min": s.low, "max": s.high, "step": s.step,
                     "value": values[s.key], "unit": s.unit} for s in TUNED]
         return {"presets": presets, "settings": sliders, "preset": self.preset,
-                "command": self.command(self.preset, values), "toml": config.to_toml(preset=self.preset)}
+                "command": self.command(self.preset, self.applied(self.preset, {})),
+                "toml": config.to_toml(preset=self.preset)}
 
     def run(self, request: dict) -> dict:
         """One run for the page: ``{"preset", "settings"}`` in, ``{"glb" (base64), "notes", "command", "toml",
@@ -174,19 +180,20 @@ class Tuner:
         if preset not in self.presets:
             return {"error": f"no preset {preset!r} (there are {', '.join(self.presets)})"}
         if not isinstance(values, dict) or not all(isinstance(v, int | float) and not isinstance(v, bool)
-                                                   for v in values.values()):
-            return {"error": "settings must be an object of numbers"}
+                                                   and math.isfinite(v) for v in values.values()):
+            return {"error": "settings must be an object of finite numbers"}
+        applied = self.applied(preset, values)
         try:
-            merged = {**self.settings(preset), **values}
-            config = self._config(preset, merged)
+            config = self._config(preset, applied)
             with self.lock:
                 result = run(self.motion, config)
                 glb, _, _ = make_glb(self.motion, result, self.skin, self.units)
         except MocapError as error:
             return {"error": str(error)}
+        shown = {**self._own(preset), **applied}
         return {"glb": base64.b64encode(glb).decode("ascii"), "notes": cell_figures(self.motion, result),
-                "command": self.command(preset, merged), "toml": config.to_toml(preset=preset),
-                "settings": {key: merged[key] for key in _BY_KEY},
+                "command": self.command(preset, applied), "toml": config.to_toml(preset=preset),
+                "settings": {key: shown[key] for key in _BY_KEY},
                 "sigma_frames": page_sigma(self.motion, config), "seconds": round(time.perf_counter() - start, 3)}
 
     def page(self) -> str:
@@ -194,27 +201,47 @@ class Tuner:
         from ..pipeline import run
         from .page import run_page
 
-        config = self._config(self.preset, self.settings(self.preset))
+        config = self._config(self.preset, self.applied(self.preset, {}))
         result = run(self.motion, config)
         return run_page(self.motion, result, config, label="tuned", skin=self.skin, units=self.units,
                         title=f"tune: {Path(self.source).name}", tune=self.start())
 
 
 class TuneServer(ThreadingHTTPServer):
-    """The tuner's HTTP server on the loopback address (``port`` 0: one the system picks)."""
+    """The tuner's HTTP server on the loopback address (``port`` 0: one the system picks). `bind_port` makes
+    it (before the clip is read, so a taken port is said at once); `serve` gives it its tuner."""
 
     daemon_threads = True
     #: The largest request body read (a run's settings are a few hundred bytes).
     MAX_BODY = 64 * 1024
 
-    def __init__(self, tuner: Tuner, port: int = 0) -> None:
-        self.tuner = tuner
-        self.html = tuner.page().encode("utf-8")
+    def __init__(self, port: int = 0) -> None:
+        self.tuner: Tuner | None = None
+        self.html = b""
         super().__init__(("127.0.0.1", port), _Handler)
 
     @property
     def url(self) -> str:
         return f"http://127.0.0.1:{self.server_address[1]}/"
+
+    def hosts(self) -> set[str]:
+        """The Host headers a request of this machine's browser carries (another is a page elsewhere
+        reaching in, through a name that resolves here)."""
+        port = self.server_address[1]
+        return {f"127.0.0.1:{port}", f"localhost:{port}"}
+
+
+def bind_port(port: int) -> TuneServer:
+    """The server on 127.0.0.1 at ``port``; ConfigError (one line) when it cannot listen there."""
+    import errno
+
+    try:
+        return TuneServer(port)
+    except OSError as error:
+        if error.errno == errno.EADDRINUSE:
+            raise ConfigError(f"--port {port}: another program listens there; give another port, or --port 0 for "
+                              "a free one") from None
+        raise ConfigError(f"--port {port}: cannot listen there ({error.strerror or error})") from None
 
 
 class _Handler(BaseHTTPRequestHandler):
@@ -232,13 +259,27 @@ class _Handler(BaseHTTPRequestHandler):
         self.end_headers()
         self.wfile.write(body)
 
+    def _json(self, code: int, answer: dict) -> None:
+        self._send(code, json.dumps(answer).encode("utf-8"), "application/json")
+
+    def _ours(self) -> bool:
+        """Whether the request names this server as its host; a 403 when not (DNS rebinding)."""
+        if self.headers.get("Host", "") in self.server.hosts():
+            return True
+        self._send(403, b"this tuner answers only at 127.0.0.1 and localhost\n", "text/plain; charset=utf-8")
+        return False
+
     def do_GET(self) -> None:  # noqa: N802  (http.server's name)
+        if not self._ours():
+            return
         if self.path.split("?")[0] in ("/", "/index.html"):
             self._send(200, self.server.html, "text/html; charset=utf-8")
         else:
             self._send(404, b"not found\n", "text/plain; charset=utf-8")
 
     def do_POST(self) -> None:  # noqa: N802
+        if not self._ours():
+            return
         if self.path.split("?")[0] != "/run":
             self._send(404, b"not found\n", "text/plain; charset=utf-8")
             return
@@ -247,23 +288,33 @@ class _Handler(BaseHTTPRequestHandler):
         except ValueError:
             length = -1
         if not 0 <= length <= TuneServer.MAX_BODY:
-            self._send(413, json.dumps({"error": "a run's request is a small JSON object"}).encode(), "application/json")
+            self._json(413, {"error": "a run's request is a small JSON object"})
             self.close_connection = True
             return
+        body = self.rfile.read(length)
+        if not self.headers.get("Content-Type", "").startswith("application/json"):
+            # (a page elsewhere can send text/plain without asking first; JSON it must ask for, and is not let)
+            self._json(415, {"error": "a run's request is JSON (Content-Type: application/json)"})
+            return
         try:
-            request = json.loads(self.rfile.read(length) or b"{}")
+            request = json.loads(body or b"{}")
         except (ValueError, RecursionError):
-            answer, code = {"error": "the request is not JSON"}, 400
-        else:
+            self._json(400, {"error": "the request is not JSON"})
+            return
+        try:
             answer = self.server.tuner.run(request)
-            code = 400 if "error" in answer else 200
-        self._send(code, json.dumps(answer).encode("utf-8"), "application/json")
+        except Exception as error:  # a bug: said to the page in one line, the tuner goes on
+            self._json(500, {"error": f"internal error ({type(error).__name__}: {str(error)[:200]}): a bug in "
+                                      "mocap-exaggerate (please report it)"})
+            return
+        self._json(400 if "error" in answer else 200, answer)
 
 
-def serve(tuner: Tuner, port: int = 0, ready=None) -> None:
-    """Serve ``tuner``'s page on 127.0.0.1 until interrupted (Ctrl-C: the server closes and this returns).
+def serve(server: TuneServer, tuner: Tuner, ready=None) -> None:
+    """Serve ``tuner``'s page on ``server`` until interrupted (Ctrl-C: the server closes and this returns).
     ``ready(url)`` is called once it listens."""
-    server = TuneServer(tuner, port)
+    server.tuner = tuner
+    server.html = tuner.page().encode("utf-8")
     try:
         if ready is not None:
             ready(server.url)

@@ -536,6 +536,9 @@ let tuneTimer = null;
 let tuneSerial = 0;
 let tuneBusy = false;     // a run is on its way
 let tunePending = null;  // {presetOnly}: a change made while it was
+// The sliders moved since the preset was chosen: only they are sent. A slider snaps a value to its step and
+// range, so sending the others changed settings nobody touched (a --stiffness 158 became 160).
+const touched = new Set();
 
 function decimals(step) {
   const text = String(step);
@@ -556,7 +559,8 @@ function buildTuner(tune) {
     const chosen = tune.presets.find((preset) => presetName(preset) === presets.value);
     const own = chosen && typeof chosen === 'object' && chosen.settings;
     if (own) setSliders(own);
-    scheduleRun(!own);
+    touched.clear();
+    scheduleRun(true);
   });
   const list = $('settings');
   for (const setting of tune.settings) {
@@ -576,7 +580,7 @@ function buildTuner(tune) {
     const unit = setting.unit ? ` ${setting.unit}` : '';
     const say = () => { shown.textContent = `${Number(slider.value).toFixed(decimals(setting.step))}${unit}`; };
     say();
-    slider.addEventListener('input', () => { say(); scheduleRun(false); });
+    slider.addEventListener('input', () => { say(); touched.add(slider.dataset.key); scheduleRun(false); });
     slider.say = say;
     row.append(name, shown, slider);
     list.append(row);
@@ -637,7 +641,9 @@ async function startRun(presetOnly) {
 async function runTuner(presetOnly) {
   const serial = ++tuneSerial;
   const settings = {};
-  if (!presetOnly) for (const slider of sliders()) settings[slider.dataset.key] = Number(slider.value);
+  for (const slider of sliders()) {
+    if (touched.has(slider.dataset.key)) settings[slider.dataset.key] = Number(slider.value);
+  }
   tuneStatus('running…', false);
   let reply;
   try {
