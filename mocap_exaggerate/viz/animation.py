@@ -28,7 +28,7 @@ from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, pose_bodies
 from .raster import BATCH, Canvas, draw_body, in_order, write
 
 __all__ = ["animation_frames", "render_frames", "render_gif", "render_mp4", "encode_gif", "encode_mp4", "gif_durations",
-           "MAX_FPS",
+           "gif_quantizer", "MAX_FPS",
            "MAX_SECONDS", "NO_FFMPEG"]
 
 log = logging.getLogger(__name__)
@@ -58,7 +58,7 @@ def animation_frames(motion: Motion, result: PipelineResult, *, start: float = 0
 
 
 def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
-                  height: int = 320, skin: Skin | None = None) -> Iterator[np.ndarray]:
+                  height: int = 320, skin: Skin | None = None, finish=None) -> Iterator[np.ndarray]:
     """RGB pictures ``(H, W, 3) uint8``, one per output frame of ``frames``: the captured body
     (left, grey) and the exaggerated one (right, orange) side by side, one camera, one scale.
 
@@ -69,7 +69,8 @@ def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
     the same size with the body at one scale, but where one exaggerates further. The camera
     follows the captured root across when it travels (`camera_centres`); ticks on the ground
     then scroll by with the travel. Both bodies are posed, shaded and drawn (`mocap_exaggerate.viz.raster`)
-    for a batch of frames at once.
+    for a batch of frames at once. ``finish`` (a GIF's quantizer, `gif_quantizer`) is applied to each
+    picture in the drawing threads.
     """
     frames = np.asarray(frames, dtype=np.int64)
     bodies = pose_bodies(motion, result, frames, skin, dtype=np.float32)
@@ -121,7 +122,7 @@ def render_frames(motion: Motion, result: PipelineResult, frames: np.ndarray, *,
                      for number, (*_, title, ink) in enumerate(panels)]
             texts.append((width_px / 2, height_px - 3, f"frame {frame}   {(frame - first) * motion.frame_time:.2f} s",
                           11, (77, 77, 77), "mb"))
-            pictures.append(write(picture, texts))
+            pictures.append(write(picture, texts) if finish is None else finish(write(picture, texts)))
         return pictures
 
     yield from in_order(draw, range(0, len(frames), BATCH))
@@ -178,14 +179,23 @@ def render_gif(motion: Motion, result: PipelineResult, *, start: float = 0.0, se
     `animation_frames`, pictures from `render_frames`. The same bytes every time."""
     check_number("max_fps", max_fps, 0.0, 50.0, low_open=True)
     frames, frame_seconds = animation_frames(motion, result, start=start, seconds=seconds, max_fps=max_fps)
-    return encode_gif(render_frames(motion, result, frames, height=height, skin=skin), frame_seconds)
+    return encode_gif(render_frames(motion, result, frames, height=height, skin=skin, finish=gif_quantizer()),
+                      frame_seconds)
 
 
-def encode_gif(pictures: Iterable[np.ndarray], frame_seconds: float) -> bytes:
-    """RGB ``pictures`` as a looping GIF, each shown ``frame_seconds``, on one fixed palette (`_gif_palette`)."""
+def gif_quantizer():
+    """A function turning an RGB picture into a GIF frame on the fixed palette (`_indexed`): drawing threads
+    call it (they share its table of colours found; two writing one colour write the same index)."""
     palette = _gif_palette()
     lookup = np.full(1 << 24, -1, dtype=np.int16)
-    indexed = [_indexed(rgb, palette, lookup) for rgb in pictures]
+    return lambda rgb: _indexed(rgb, palette, lookup)
+
+
+def encode_gif(pictures: Iterable, frame_seconds: float) -> bytes:
+    """``pictures`` (RGB arrays, or frames `gif_quantizer` made) as a looping GIF, each shown ``frame_seconds``,
+    on one fixed palette (`_gif_palette`)."""
+    quantize = gif_quantizer()
+    indexed = [picture if not isinstance(picture, np.ndarray) else quantize(picture) for picture in pictures]
     buffer = io.BytesIO()
     indexed[0].save(buffer, format="GIF", save_all=True, append_images=indexed[1:], loop=0,
                     duration=gif_durations(len(indexed), frame_seconds))

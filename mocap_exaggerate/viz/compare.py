@@ -28,7 +28,7 @@ from ..core.errors import ConfigError
 from ..core.motion import Motion
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin
-from .animation import MAX_FPS, NO_FFMPEG, animation_frames, encode_gif, encode_mp4
+from .animation import MAX_FPS, NO_FFMPEG, animation_frames, encode_gif, encode_mp4, gif_quantizer
 from .framing import camera_centres, preview_window, telling_frames, view_limits
 from .posing import CAPTURED_COLOR, EXAGGERATED_COLOR, facing, pose_captured, pose_exaggerated
 from .raster import BATCH, Canvas, draw_body, in_order, write
@@ -201,7 +201,7 @@ def render_grid_png(motion: Motion, ran: list[Ran], *, columns: int, frames: int
 
 
 def render_grid_frames(motion: Motion, ran: list[Ran], frames: np.ndarray, *, columns: int,
-                       cell_px: int = 180, skin: Skin | None = None) -> Iterator[np.ndarray]:
+                       cell_px: int = 180, skin: Skin | None = None, finish=None) -> Iterator[np.ndarray]:
     """RGB pictures, one per output frame of ``frames``: every cell's body moving in step, the captured
     one first, one camera (following the captured root where it travels) and one scale for all."""
     _lined_up(ran)
@@ -249,7 +249,7 @@ def render_grid_frames(motion: Motion, ran: list[Ran], frames: np.ndarray, *, co
             frame = frames[begin + k]
             said = texts + [(width / 2, height - 3, f"frame {frame}   {(frame - first) * motion.frame_time:.2f} s",
                              11, (77, 77, 77), "mb")]
-            pictures.append(write(picture, said))
+            pictures.append(write(picture, said) if finish is None else finish(write(picture, said)))
         return pictures
 
     yield from in_order(draw, range(0, len(frames), BATCH))
@@ -312,7 +312,10 @@ def write_compare(source, output: str | os.PathLike, cells: list[Cell], *, colum
         data = render_grid_html(motion, ran, skin=body, title=f"compare: {Path(where).name}")
     else:
         shown, frame_seconds = animation_frames(motion, ran[0].result, start=start, seconds=seconds, max_fps=max_fps)
-        pictures = render_grid_frames(motion, ran, shown, columns=columns, skin=body)
-        data = encode_gif(pictures, frame_seconds) if suffix == ".gif" else encode_mp4(pictures, frame_seconds)
+        if suffix == ".gif":
+            data = encode_gif(render_grid_frames(motion, ran, shown, columns=columns, skin=body, finish=gif_quantizer()),
+                              frame_seconds)
+        else:
+            data = encode_mp4(render_grid_frames(motion, ran, shown, columns=columns, skin=body), frame_seconds)
     atomic_write(output, data, overwrite=True)
     return output, ran
