@@ -322,6 +322,7 @@ def test_a_scheduler_without_workers_is_said_not_waited_on_forever(monkeypatch):
     from mocap_exaggerate.jobs import on_dask
 
     monkeypatch.setattr(on_dask, "WAIT_FOR_WORKERS", 1.0)
-    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+    # (over tcp: an inproc:// address, another process's memory, is refused as such)
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", dashboard_address=None) as cluster:
         with pytest.raises(ConfigError, match="has no workers"):
             on_dask.connect_dask(cluster.scheduler_address)
