@@ -107,7 +107,9 @@ def tuner_round_trip(clip: Path) -> None:
         for omega in (3, 4, 5, 6, 7):
             body = json.dumps({"preset": "cartoon", "settings": {"extrapolate.omega": omega}}).encode()
             start = time.perf_counter()
-            with urllib.request.urlopen(urllib.request.Request(url + "run", data=body, method="POST")) as answer:
+            request = urllib.request.Request(url + "run", data=body, method="POST",
+                                             headers={"Content-Type": "application/json"})
+            with urllib.request.urlopen(request) as answer:
                 took = json.loads(answer.read())["seconds"]
             best = min(best, time.perf_counter() - start)
         print(f"\ntune, {clip.stem} (1,000 frames): a slider change to its new GLB over HTTP {best:.2f} s "

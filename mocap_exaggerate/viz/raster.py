@@ -71,18 +71,24 @@ class Canvas:
         self.index[picture, rows, columns] = colour
 
     def pictures(self) -> np.ndarray:
-        """``(count, height, width, 3) uint8``: the pictures, averaged down from the supersampled drawing."""
+        """``(count, height, width, 3) uint8``: the pictures, averaged down from the supersampled drawing.
+
+        Only the pixels with something drawn in them are averaged (a body fills a sixth of its picture);
+        the rest are the background."""
         palette = np.rint(np.concatenate(self.palette) * 255.0).clip(0, 255).astype(np.uint32)
         # Each colour packed in one word, 10 bits a channel: the sum of up to 4 samples does not carry over.
         s = self.scale
         packed = (palette[:, 0] << 20) | (palette[:, 1] << 10) | palette[:, 2]
         out = np.empty((self.count, self.height, self.width, 3), dtype=np.uint8)
+        out[...] = palette[0].astype(np.uint8)
         half = (s * s) // 2
         for k in range(self.count):  # one picture at a time: a batch's supersampled colours are large
-            words = packed[self.index[k]]
-            total = sum(words[i::s, j::s] for i in range(s) for j in range(s))
+            samples = [self.index[k, i::s, j::s] for i in range(s) for j in range(s)]
+            drawn = np.flatnonzero(np.bitwise_or.reduce(samples).ravel())
+            total = sum(packed[sample.ravel()[drawn]] for sample in samples)
+            picture = out[k].reshape(-1, 3)
             for channel, shift in enumerate((20, 10, 0)):
-                out[k, ..., channel] = (((total >> shift) & 1023) + half) // (s * s)
+                picture[drawn, channel] = (((total >> shift) & 1023) + half) // (s * s)
         return out
 
 
