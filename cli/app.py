@@ -19,7 +19,7 @@ import click
 
 # Only light modules at import time: `--help` must not wait for SciPy, trimesh or pygltflib.
 from mocap_exaggerate import __version__
-from mocap_exaggerate.core.errors import MocapError
+from mocap_exaggerate.core.errors import MocapError, printable
 from mocap_exaggerate.io.files import OutputExistsError
 
 __all__ = ["cli", "UserError", "INTERNAL_ERROR", "fail_cleanly", "verbosity_options", "quiet", "shown", "one_line",
@@ -78,12 +78,6 @@ def one_line(message: str, most: int = _LONGEST_MESSAGE) -> str:
     escaped as Python writes them (``\\n``, ``\\udcff``), cut short past ``most`` characters."""
     text = printable(message)
     return text if len(text) <= most else f"{text[:most]}... ({len(text)} characters)"
-
-
-def printable(text: str) -> str:
-    """``text`` with control characters (a terminal's escape sequences) and undecodable bytes escaped
-    as Python writes them: a joint or file name cannot drive the terminal it is shown on."""
-    return "".join(c if c.isprintable() or c == " " else repr(c)[1:-1] for c in str(text))
 
 
 class _Printable(logging.Formatter):

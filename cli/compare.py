@@ -10,7 +10,7 @@ from pathlib import Path
 import click
 
 from .app import UserError, cli, fail_cleanly, quiet, shown, verbosity_options
-from .options import FilePath, config_from_options, run_options_command
+from .options import FilePath, config_from_options, picture_options, run_options_command
 
 #: The options of a run, as ``exaggerate`` reads them: each cell's words are parsed by this command.
 _settings = run_options_command()
@@ -117,11 +117,7 @@ def _compare_options(func):
               help="File to write: .png (still frames), .gif or .mp4 (animated; .mp4 needs ffmpeg) or .html (a page).")
 @click.option("--frames", "count", type=click.IntRange(1, 8), default=3, show_default=True,
               help="How many evenly spaced frames each cell of a .png shows.")
-@click.option("--start", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="SECONDS",
-              help="Show the motion from this many seconds in.")
-@click.option("--seconds", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="SECONDS",
-              help="Show this many seconds [default: all; an animation stops at 10].")
-@click.option("--overwrite", is_flag=True, help="Replace the file if it exists.")
+@picture_options
 @_compare_options
 @verbosity_options
 @fail_cleanly

@@ -33,7 +33,8 @@ from .app import shown
 
 __all__ = ["FilePath", "pipeline_options", "output_options", "character_options", "folder_arguments",
            "setting_option", "setting_param", "settings_given", "config_from_options", "given_options",
-           "joint_map_of", "parsed_each", "parse_settings", "run_options_command"]
+           "joint_map_of", "parsed_each", "parse_settings", "run_options_command",
+           "picture_options"]
 
 
 class FilePath(click.Path):
@@ -302,3 +303,15 @@ def run_options_command() -> click.Command:
         """A run's options."""
 
     return run_options
+
+
+def picture_options(func: Callable) -> Callable:
+    """``--start``, ``--seconds`` and ``--overwrite``, shared by ``preview`` and ``compare``."""
+    for option in reversed([
+            click.option("--start", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="SECONDS",
+                         help="Show the motion from this many seconds in."),
+            click.option("--seconds", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="SECONDS",
+                         help="Show this many seconds [default: all; an animation stops at 10]."),
+            click.option("--overwrite", is_flag=True, help="Replace the file if it exists.")]):
+        func = option(func)
+    return func

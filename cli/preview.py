@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from .app import cli, fail_cleanly, quiet, verbosity_options
-from .options import FilePath, character_options, config_from_options, pipeline_options
+from .options import FilePath, character_options, config_from_options, picture_options, pipeline_options
 
 
 @cli.command()
@@ -20,11 +20,7 @@ from .options import FilePath, character_options, config_from_options, pipeline_
               help="How many evenly spaced frames a .png shows.")
 @click.option("--trajectory", metavar="JOINT", default=None,
               help="Draw this joint's captured, averaged and exaggerated paths instead (a .png).")
-@click.option("--start", type=click.FloatRange(min=0.0), default=0.0, show_default=True, metavar="SECONDS",
-              help="Show the motion from this many seconds in.")
-@click.option("--seconds", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="SECONDS",
-              help="Show this many seconds [default: all; an animation stops at 10].")
-@click.option("--overwrite", is_flag=True, help="Replace the file if it exists.")
+@picture_options
 @character_options
 @pipeline_options
 @verbosity_options

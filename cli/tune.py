@@ -36,19 +36,15 @@ def tune(ctx: click.Context, input_path: Path, port: int, **options) -> None:
 
     from mocap_exaggerate.config import PipelineConfig
     from mocap_exaggerate.core.settings import flagged_settings
-    from mocap_exaggerate.io.gltf_motion import is_gltf
-    from mocap_exaggerate.jobs.job import Character, read_clip
+    from mocap_exaggerate.viz.preview import clip_and_character
     from mocap_exaggerate.viz.tune import TUNED, Tuner, bind_port, serve, slider_values
 
     from .options import run_options_command, setting_param
 
     preset, config = config_from_options(options)
-    # A game character is tuned on its own mesh, as exaggerate writes it.
-    own = input_path if is_gltf(input_path) and not config.glb.skin else None
-    character = Character.of(config.glb, glb=True, skin=own, joint_map=None, units=None, influences=None)
     server = bind_port(port)  # the port first: a taken one is said before the clip is read
-    motion, _ = read_clip(input_path, config.input)
-    skin, _ = character.bound_to(motion, str(input_path))
+    # The clip, and the character it is tuned on (a glTF's own mesh where none is named), as a preview's.
+    motion, skin, _ = clip_and_character(input_path, {}, config)
     # The options given, but the sliders' own (their values start the sliders; the command sets them with --set).
     tuned = {slider.key for slider in TUNED}
     sliders = {setting_param(block, key): f"{block}.{key}" for block, key, _ in flagged_settings(PipelineConfig)

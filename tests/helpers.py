@@ -178,3 +178,15 @@ def no_glb(preset: str):
     from mocap_exaggerate.config import resolve_config
 
     return resolve_config(preset, overrides={"glb": {"enabled": False}})
+
+
+def chromium() -> str | None:
+    """The Chromium the browser tests drive (``MOCAP_CHROMIUM``, else one on PATH), None without one."""
+    import os
+    import shutil
+
+    for path in (os.environ.get("MOCAP_CHROMIUM"), shutil.which("chromium"), shutil.which("chromium-browser"),
+                 shutil.which("google-chrome")):
+        if path and Path(path).exists():
+            return path
+    return None

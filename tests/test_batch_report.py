@@ -19,7 +19,7 @@ import pytest
 from mocap_exaggerate.jobs.batch import BatchOptions, FileResult, find_clips, run_batch
 from mocap_exaggerate.viz.report import GENERATOR, picture_paths, pictures_current, write_report
 
-from .helpers import SAMPLE_DIR, no_glb
+from .helpers import SAMPLE_DIR, chromium, no_glb
 from .test_batch import JUMP, RUN, command, files_under, mixed_folder
 
 needs_dask = pytest.mark.skipif(find_spec("distributed") is None,
@@ -233,14 +233,6 @@ def test_an_interrupted_batch_reports_what_did_not_start(tmp_path):
 
 
 # ---------------------------------------------------------------------------- in a browser
-
-
-def chromium() -> str | None:
-    for path in (os.environ.get("MOCAP_CHROMIUM"), shutil.which("chromium"), shutil.which("chromium-browser"),
-                 shutil.which("google-chrome")):
-        if path and Path(path).exists():
-            return path
-    return None
 
 
 def test_the_report_opens_from_disk_in_a_browser_with_every_picture_shown(tmp_path):

@@ -12,14 +12,11 @@ import base64
 import functools
 import io
 import json
-import os
 import re
-import shutil
 import threading
 from html.parser import HTMLParser
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib.resources import files
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,7 +27,7 @@ from mocap_exaggerate.jobs.outputs import make_glb
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.viz.page import PageFigure, page_html
 
-from .helpers import SAMPLE_DIR
+from .helpers import SAMPLE_DIR, chromium
 
 RUN = SAMPLE_DIR / "cmu_09_01_run_daz.bvh"
 ENDS = ["lHand", "rHand", "lFoot", "rFoot", "noSuchJoint"]
@@ -150,14 +147,6 @@ def test_what_the_page_cannot_show_is_refused_naming_it(change, says):
 
 
 # ---------------------------------------------------------------------------- in a browser
-
-
-def chromium() -> str | None:
-    for path in (os.environ.get("MOCAP_CHROMIUM"), shutil.which("chromium"), shutil.which("chromium-browser"),
-                 shutil.which("google-chrome")):
-        if path and Path(path).exists():
-            return path
-    return None
 
 
 @pytest.fixture(scope="module")

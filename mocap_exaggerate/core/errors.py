@@ -6,11 +6,17 @@ setting at fault, so the command line can print it as it is.
 
 from __future__ import annotations
 
-__all__ = ["MocapError", "InputError", "ConfigError", "check_number", "check_flag", "check_choice"]
+__all__ = ["MocapError", "InputError", "ConfigError", "check_number", "check_flag", "check_choice", "printable"]
 
 
 class MocapError(Exception):
     """Base of the errors a user can cause and fix."""
+
+
+def printable(text: str, keep: str = " ") -> str:
+    """``text`` with control characters (a terminal's escape sequences) and undecodable bytes escaped as
+    Python writes them (``\\x1b``, ``\\udcff``): a joint or file name cannot drive what shows it."""
+    return "".join(c if c.isprintable() or c in keep else repr(c)[1:-1] for c in str(text))
 
 
 class InputError(MocapError, ValueError):

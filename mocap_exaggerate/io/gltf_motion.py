@@ -29,6 +29,7 @@ from ..core.kinematics import local_from_world
 from ..core.motion import Motion
 from ..core.rotations import quat_from_matrix, quat_normalize, quat_slerp
 from ..core.skeleton import Skeleton
+from .bvh import MAX_FRAMES as BVH_MAX_FRAMES
 from .skin import _node_local, _skinned_piece, _unique_names, _world_matrices, open_gltf
 
 __all__ = ["GLTF_SUFFIXES", "is_gltf", "GltfReport", "gltf_animations", "read_gltf_motion", "DEFAULT_GLTF_FPS"]
@@ -38,8 +39,8 @@ GLTF_SUFFIXES = (".glb", ".gltf")
 DEFAULT_GLTF_FPS = 30.0
 #: The keys' own rate is taken when it lies in this range (keys every 1/24 s: 24 fps).
 _KEY_RATES = (10.0, 240.0)
-#: Most frames one clip may be sampled into.
-MAX_FRAMES = 1_000_000
+#: Most frames one clip may be sampled into: the BVH reader's cap (`mocap_exaggerate.io.bvh.MAX_FRAMES`).
+MAX_FRAMES = BVH_MAX_FRAMES
 
 
 def is_gltf(source) -> bool:

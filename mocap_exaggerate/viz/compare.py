@@ -56,18 +56,21 @@ class Cell:
 
 @dataclass
 class Ran:
-    """A cell run: its `Cell`, the pipeline's result and `cell_figures`."""
+    """A cell run: its `Cell`, the pipeline's result, `cell_figures` and the numbers they show
+    (``summary``: `mocap_exaggerate.analysis.quality.summary`)."""
 
     cell: Cell
     result: PipelineResult
     figures: dict = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)
 
 
-def cell_figures(motion: Motion, result: PipelineResult) -> dict[str, str]:
-    """A run's figures as short texts: ``{"stretch": "1.42x", "jerk": "0.91", "limit": "12 %"}``."""
+def cell_figures(motion: Motion, result: PipelineResult, found: dict | None = None) -> dict[str, str]:
+    """A run's figures as short texts: ``{"stretch": "1.42x", "jerk": "0.91", "limit": "12 %"}`` (of its
+    `mocap_exaggerate.analysis.quality.summary`, ``found`` when the caller has it)."""
     from ..analysis.quality import summary
 
-    found = summary(motion, result)
+    found = summary(motion, result) if found is None else found
     return {"stretch": f"{found['stretch']:.2f}x", "jerk": f"{found['jerk']:.2f}",
             "limit": "-" if found["limit"] is None else f"{found['limit']:.0%}"}
 
@@ -80,7 +83,10 @@ def run_cells(motion: Motion, cells: list[Cell], threads: int = 2) -> list[Ran]:
 
     def one(cell: Cell) -> Ran:
         result = run(motion, cell.config)
-        return Ran(cell, result, cell_figures(motion, result))
+        from ..analysis.quality import summary
+
+        found = summary(motion, result)
+        return Ran(cell, result, cell_figures(motion, result, found), found)
 
     with ThreadPoolExecutor(max(1, threads)) as pool:
         return list(pool.map(one, cells))
@@ -166,7 +172,7 @@ def render_grid_png(motion: Motion, ran: list[Ran], *, columns: int, frames: int
     begin, end = preview_window(motion, ran[0].result, start=start, seconds=seconds)
     if start == 0.0 and seconds is None:
         # The moments the strongest run (its longest limb) is exaggerated most: the ends of a clip are as captured.
-        strongest = max(ran, key=lambda r: float(r.figures["stretch"].rstrip("x")))
+        strongest = max(ran, key=lambda r: r.summary["stretch"])
         picks = np.asarray(telling_frames(motion, strongest.result, frames), dtype=np.int64)
     else:
         picks = np.unique(np.linspace(begin, end - 1, frames).astype(int))
@@ -280,7 +286,7 @@ def write_compare(source, output: str | os.PathLike, cells: list[Cell], *, colum
     import shutil
 
     from ..io.files import atomic_write
-    from ..jobs.job import Character, check_targets, read_clip
+    from .preview import clip_and_character
 
     output = Path(output)
     suffix = output.suffix.lower()
@@ -293,18 +299,8 @@ def write_compare(source, output: str | os.PathLike, cells: list[Cell], *, colum
         raise ConfigError("nothing to compare: give lists of values, e.g. --omega 2,4,6")
     if len(cells) > MAX_CELLS:
         raise ConfigError(f"{len(cells)} settings to compare; at most {MAX_CELLS} (each is a run of the pipeline)")
-    config = config or cells[0].config
-    from ..io.gltf_motion import is_gltf
-
-    if is_gltf(source) and skin is None and not config.glb.skin:
-        skin = Path(source)  # a game character is drawn with its own mesh, as exaggerate writes it
-    character = Character.of(config.glb, glb=True, skin=skin, joint_map=joint_map, units=None, influences=None)
-    inputs = [Path(p) for p in (source, character.skin_file, character.map_file)
-              if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
-    check_targets({"compare": output}, inputs, overwrite)
-    motion, _ = read_clip(source, config.input, name=label)
-    where = label or (str(source) if inputs else "the clip")
-    body, _ = character.bound_to(motion, where)
+    motion, body, where = clip_and_character(source, {"compare": output}, config or cells[0].config, skin=skin,
+                                             joint_map=joint_map, overwrite=overwrite, label=label)
     ran = run_cells(motion, cells)
     if suffix == ".png":
         data = render_grid_png(motion, ran, columns=columns, frames=frames, start=start, seconds=seconds, skin=body)

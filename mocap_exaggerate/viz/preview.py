@@ -23,7 +23,7 @@ from .animation import MAX_FPS, NO_FFMPEG, render_gif, render_mp4
 from .framing import preview_window
 from .stills import render_preview, render_trajectory
 
-__all__ = ["write_preview", "joint_named", "PREVIEW_SUFFIXES"]
+__all__ = ["write_preview", "clip_and_character", "joint_named", "PREVIEW_SUFFIXES"]
 
 PREVIEW_SUFFIXES = (".png", ".gif", ".mp4", ".html")
 
@@ -37,6 +37,27 @@ def joint_named(skeleton: Skeleton, name: str, where: str = "the clip") -> int:
     close += [n for n in difflib.get_close_matches(name, skeleton.names, n=5, cutoff=0.5) if n not in close]
     hint = f"close names: {', '.join(close[:5])}" if close else f"its joints include {', '.join(skeleton.names[:5])}"
     raise ConfigError(f"no joint named {name!r} in {where}; {hint}")
+
+
+def clip_and_character(source, targets: dict, config, *, skin=None, joint_map=None, overwrite: bool = False,
+                       label: str | None = None):
+    """What a picture of a clip starts from: the clip read (``config.input``), the body drawn bound to it
+    (the GLB's: ``config.glb``'s character with ``skin`` and ``joint_map`` over it, a glTF clip's own mesh
+    where none is named) and how to name the clip in messages; the ``targets`` (kind -> path) checked first
+    (never an input; taken only with ``overwrite``), as a job's."""
+    from ..io.gltf_motion import is_gltf
+    from ..jobs.job import Character, check_targets, read_clip
+
+    if is_gltf(source) and skin is None and not config.glb.skin:
+        skin = Path(source)  # a game character is drawn with its own mesh, as exaggerate writes it
+    character = Character.of(config.glb, glb=True, skin=skin, joint_map=joint_map, units=None, influences=None)
+    inputs = [Path(p) for p in (source, character.skin_file, character.map_file)
+              if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
+    check_targets(targets, inputs, overwrite)
+    motion, _ = read_clip(source, config.input, name=label)
+    where = label or (str(source) if inputs else "the clip")
+    body, _ = character.bound_to(motion, where)
+    return motion, body, where
 
 
 def _kind(output: Path, trajectory: str | None) -> str:
@@ -72,25 +93,14 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     """
     from ..config import DEFAULT_PRESET, load_preset
     from ..io.files import atomic_write
-    from ..jobs.job import Character, check_targets, read_clip
     from ..pipeline import run
 
     output = Path(output)
     kind = _kind(output, trajectory)
     config = config or load_preset(DEFAULT_PRESET)
-    from ..io.gltf_motion import is_gltf
-
-    if is_gltf(source) and skin is None and not config.glb.skin:
-        skin = Path(source)  # a game character is drawn with its own mesh
-    # The body drawn is the GLB's: the config's [glb] character, the arguments over it, read and checked as a job's.
-    character = Character.of(config.glb, glb=True, skin=skin, joint_map=joint_map, units=None, influences=None)
-    inputs = [Path(p) for p in (source, character.skin_file, character.map_file)
-              if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
-    check_targets({"preview": output}, inputs, overwrite)
-    motion, _ = read_clip(source, config.input, name=label)
-    where = label or (str(source) if inputs else "the clip")
+    motion, skin, where = clip_and_character(source, {"preview": output}, config, skin=skin, joint_map=joint_map,
+                                             overwrite=overwrite, label=label)
     joint = joint_named(motion.skeleton, trajectory, where) if trajectory is not None else None
-    skin, _ = character.bound_to(motion, where)
     result = run(motion, config)
     if kind == ".gif":
         data = render_gif(motion, result, start=start, seconds=seconds, max_fps=max_fps, skin=skin)

@@ -19,7 +19,7 @@ import os
 from pathlib import Path
 from urllib.parse import quote
 
-from ..core.errors import ConfigError
+from ..core.errors import ConfigError, printable
 
 __all__ = ["REPORT_FOLDER", "picture_paths", "write_pictures", "pictures_current", "write_report", "check_report"]
 
@@ -230,8 +230,7 @@ def _e(text) -> str:
     """``text`` for the page: HTML-escaped, a name that is not UTF-8 shown with its odd bytes replaced,
     control characters as Python writes them (``\\x1b``)."""
     text = str(text).encode("utf-8", "surrogateescape").decode("utf-8", "replace")
-    text = "".join(c if c.isprintable() or c in " \t" else repr(c)[1:-1] for c in text)
-    return html.escape(text, quote=True)
+    return html.escape(printable(text, keep=" \t"), quote=True)
 
 
 _PAGE = """<!DOCTYPE html>
