@@ -9,6 +9,8 @@ from pathlib import Path
 
 import click
 
+from mocap_exaggerate.core.errors import MocapError
+
 from .app import UserError, cli, fail_cleanly, quiet, shown, verbosity_options
 from .options import FilePath, config_from_options, picture_options, run_options_command
 
@@ -96,7 +98,10 @@ def cells_of(options: dict) -> tuple[list, int, list[str]]:
             context = _settings.make_context("compare", list(argv))
         except click.UsageError as error:
             raise UserError(f"{' '.join(words)}: {error.format_message()}") from None
-        _, config = config_from_options(context.params)
+        try:
+            _, config = config_from_options(context.params)
+        except MocapError as error:  # the cell's words named: which value of which list
+            raise UserError(f"{' '.join(words)}: {error}") from None
         label = ", ".join(f"{param.opts[-1].lstrip('-')} {value}" for (param, _), value in zip(varying, combination))
         cells.append(Cell(label, tuple(argv), config))
     return cells, len(varying[-1][1]), fixed
