@@ -191,14 +191,40 @@ def test_writer_refuses_nan(sample_clip):
         format_bvh(motion.replace(local_positions=positions))
 
 
-@pytest.mark.parametrize("decimals", [1, 4, 6])
+@pytest.mark.parametrize("decimals", [0, 1, 4, 6, 9])
 @pytest.mark.parametrize("scale", [1e-4, 1.0, 300.0, 5e8])
-def test_fast_number_formatting_equals_printf(decimals, scale):
-    from mocap_exaggerate.io.bvh import format_fixed
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_fast_number_formatting_equals_printf(decimals, scale, compiled):
+    from mocap_exaggerate.io import bvh
 
+    if compiled and bvh._compiled is None:
+        pytest.skip("the compiled formatter was not built (no C compiler at install); the NumPy one is tested")
     rng = np.random.default_rng(int(scale * 10) % 1000 + decimals)
     values = rng.normal(scale=scale, size=(40, 7))
     values[0] = [0.0, -0.0, -1e-12, 9.99999996, -99.99999996, 123456.5, 1e-3]
+    values[1] = [0.5e-6, 1.5e-6, 2.5e-6, -0.5e-6, 0.5, 2.5, -3.5]  # halves: to even, as np.round
     expected_row = " ".join([f"%.{decimals}f"] * 7) + "\n"
     expected = (expected_row * 40) % tuple((np.round(values, decimals) + 0.0).ravel().tolist())
-    assert format_fixed(values, decimals) == expected.encode()
+    assert bvh.format_fixed(values, decimals, compiled=compiled) == expected.encode()
+
+
+def test_compiled_formatter_is_built_where_ci_runs():
+    """.ci/run installs on a machine with a C compiler: the compiled formatter must be there (else the
+    NumPy fallback would pass every test while the writer ran 6x slower)."""
+    import shutil
+
+    from mocap_exaggerate.io import bvh
+
+    if shutil.which("cc") is None and shutil.which("gcc") is None:
+        pytest.skip("no C compiler here: the install uses the NumPy formatter")
+    assert bvh._compiled is not None, "io/_formatting.c was not built: pip install -e . (setup.py builds it)"
+
+
+def test_both_formatters_write_a_whole_clip_alike(sample_clip):
+    from mocap_exaggerate.io import bvh
+
+    if bvh._compiled is None:
+        pytest.skip("the compiled formatter was not built")
+    motion, _ = read_bvh(sample_clip)
+    values = bvh.motion_channels(motion)
+    assert bvh.format_fixed(values) == bvh.format_fixed(values, compiled=False)
