@@ -143,11 +143,11 @@ class _Commands(click.Group):
             if not standalone:
                 raise
             _say(one_line(error.format_message()), error.exit_code)
-        except click.exceptions.Abort:
+        except click.exceptions.Abort as error:
             if not standalone:
                 raise
             click.echo("Aborted!", err=True)
-            sys.exit(1)
+            sys.exit(130 if isinstance(error.__cause__, KeyboardInterrupt) else 1)  # Ctrl-C: as a shell says it
         except Exception as error:  # a bug: said in one line; the traceback is for -vv
             if not standalone:
                 raise

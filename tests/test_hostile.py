@@ -684,7 +684,7 @@ def test_ctrl_c_in_the_first_moments_is_quiet(tmp_path):
         process.send_signal(signal.SIGINT)
         _, said = process.communicate(timeout=60)
         assert "Traceback" not in said, (delay, said)
-        assert process.returncode in (0, 1, 130, -signal.SIGINT), (delay, process.returncode, said)
+        assert process.returncode in (0, 130, -signal.SIGINT), (delay, process.returncode, said)  # 0: it had ended
 
 
 def test_names_with_terminal_escapes_are_shown_escaped(tmp_path):

@@ -83,11 +83,7 @@ def run_pool(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOption
     queue = largest_first(clips)
     queue.reverse()  # pop() from the end
     with one_thread_per_worker():
-        # The forkserver and the workers start with Ctrl-C ignored (the disposition passes through
-        # exec and fork): one pressed while they are still importing would otherwise print their
-        # tracebacks. The batch itself hears it as soon as they are started.
-        with _ctrl_c_ignored():
-            workers = [_Worker(context) for _ in range(min(jobs, len(clips)))]
+        workers: list[_Worker] = []
         running: dict[Future, _Worker] = {}
 
         def hand_out() -> None:  # one clip per worker at a time: Ctrl-C then has only those to wait for
@@ -126,6 +122,11 @@ def run_pool(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOption
                 hand_out()
 
         try:
+            # The forkserver and the workers start with Ctrl-C held back (blocked: the mask passes through
+            # exec and fork), so that one pressed while they import prints no traceback of theirs; the
+            # batch hears it when they are started, as it would while they work, and ends them cleanly.
+            with _ctrl_c_held():
+                workers.extend(_Worker(context) for _ in range(min(jobs, len(clips))))
             drain()
         except KeyboardInterrupt:
             queue.clear()
@@ -171,7 +172,12 @@ class _Worker:
                 process.terminate()
 
     def close(self) -> None:
-        """Wait for the process to end (after its clip, when it holds one)."""
+        """Wait for the process to end (after its clip, when it holds one). A process still starting
+        is let start first: it reads its queue's semaphores, which the executor's shutdown removes."""
+        try:
+            self.pid.result(timeout=_STARTING)
+        except (BrokenProcessPool, CancelledError, TimeoutError):  # never started, or dead already
+            pass
         self.pool.shutdown(wait=True, cancel_futures=True)
 
 
@@ -186,15 +192,31 @@ def _worker_context():
 
 
 @contextmanager
-def _ctrl_c_ignored() -> Iterator[None]:
-    """SIGINT ignored in this process (where it is the main thread) while the block runs."""
-    main = threading.current_thread() is threading.main_thread()
-    before = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+def _ctrl_c_held() -> Iterator[None]:
+    """A Ctrl-C pressed while the block runs is held back and raised when it ends, not lost.
+
+    Processes started in the block never hear the terminal's Ctrl-C, which is the batch's to handle:
+    SIGINT is blocked in this thread, and the mask passes through fork and exec (their imports print
+    no traceback). Where another thread of this process takes the signal instead, a handler notes it.
+    """
+    from multiprocessing import resource_tracker
+
+    if threading.current_thread() is not threading.main_thread():  # no signals here: nothing to hold
+        yield
+        return
+    # Started first: starting it unblocks SIGINT in this thread (resource_tracker.ensure_running).
+    resource_tracker.ensure_running()
+    pressed: list[bool] = []
+    before_handler = signal.signal(signal.SIGINT, lambda *_: pressed.append(True))
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
-        if before is not None:
-            signal.signal(signal.SIGINT, before)
+        if signal.SIGINT not in before:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # one pressed meanwhile arrives now
+        signal.signal(signal.SIGINT, before_handler)  # (which first runs the handlers of signals arrived)
+    if pressed and callable(before_handler):
+        before_handler(signal.SIGINT, None)  # Python's own raises KeyboardInterrupt
 
 
 def _worker_start(batch_pid: int) -> None:
