@@ -78,7 +78,7 @@ def connect_dask(scheduler: str, jobs: int = 1):
             # adaptive thresholds off: every large NumPy temporary became fresh pages from the kernel and
             # each clip took 1.9-2.0x as long as in the pool. Unset, the workers allocate as -j does.
             with one_thread_per_worker(), dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_":
-                                                             None}):
+                                                             None, "distributed.worker.profile.enabled": False}):
                 cluster = LocalCluster(n_workers=max(jobs, 1), threads_per_worker=1, processes=True,
                                        dashboard_address=None, silence_logs=logging.ERROR)
         except KeyboardInterrupt:
