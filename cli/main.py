@@ -24,6 +24,9 @@ def _group():
 
 def main() -> None:
     try:
+        from mocap_exaggerate.jobs.memory import keep_freed_memory
+
+        keep_freed_memory()  # one command per process: a long clip's temporaries reuse the heap's pages
         group = _group()
         code = group.main(prog_name="mocap-exaggerate")
     except KeyboardInterrupt:  # before the group's own handling took over (while loading)

@@ -801,6 +801,25 @@ def test_a_clip_over_the_size_limit_is_refused_before_it_is_read(monkeypatch):
     assert files.read_stream(io.BytesIO(b"x" * 100), limit=100, what="clip", label="<stdin>") == b"x" * 100
 
 
+def test_the_command_keeps_freed_memory_for_long_clips():
+    """The command's process takes large blocks from the heap and keeps what is freed (`keep_freed_memory`):
+    set once, in the process; left alone where the user set glibc's variables themselves."""
+    import os
+
+    if not os.path.exists("/lib/x86_64-linux-gnu/libc.so.6") and not os.path.exists("/usr/lib/libc.so.6"):
+        pytest.skip("not glibc")
+    code = "from mocap_exaggerate.jobs.memory import keep_freed_memory as k; print(k(), k())"
+    clean = {name: value for name, value in os.environ.items() if not name.startswith("MALLOC_")}
+    done = subprocess.run([sys.executable, "-c", code], env=clean, capture_output=True, text=True, timeout=60)
+    assert done.stdout.split() == ["True", "True"], done.stderr
+    done = subprocess.run([sys.executable, "-c", code], env={**clean, "MALLOC_ARENA_MAX": "4"}, capture_output=True,
+                          text=True, timeout=60)
+    assert done.stdout.split() == ["False", "False"], done.stderr
+    from mocap_exaggerate.jobs import memory
+
+    assert memory._KEEP < 2**31  # mallopt takes a C int: 4 GiB was cut to 0 (trim everything) before
+
+
 def test_dask_workers_get_glibc_thresholds_back():
     import os
 

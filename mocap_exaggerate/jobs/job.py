@@ -330,13 +330,13 @@ def convert(
         unlikely = guessed_units_warning(glb_units, motion.skeleton.height())
         warnings += [unlikely] if unlikely else []
     skin, binding = character.bound_to(motion, label) if glb else (None, None)  # a skin that will not bind costs nothing
+    input_hash = digest_of(data)
+    del data  # the input's bytes are not needed past this point; a long clip's are tens of MB, at the pipeline's peak
     result = run(motion, config, paths=paths)
     warnings += result.warnings
     timings.update(result.timings)
     for target in targets.values():
         remove_stale_temporaries(target, keep=inputs)  # what a killed earlier run of these outputs left
-    input_hash = digest_of(data)
-    del data  # the input's bytes are not needed past this point; a long clip's are tens of MB
     info = None
     outputs: dict[str, Any] = {}
     with ThreadPoolExecutor(max_workers=1) as pool, OutputSet(overwrite=True) as written:

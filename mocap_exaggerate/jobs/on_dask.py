@@ -19,6 +19,7 @@ from pathlib import Path
 from ..core.errors import ConfigError
 from .batch_types import BatchOptions, Clip, FileResult
 from .discovery import largest_first, source_size
+from .memory import malloc_thresholds
 from .pool import one_thread_per_worker
 from .task import clear_temporaries, convert_file
 
@@ -187,32 +188,6 @@ def convert_on_worker(*args) -> FileResult:
     its nanny turned them off (`malloc_thresholds`): a cluster this tool did not start runs at the pool's speed."""
     malloc_thresholds()
     return convert_file(*args)
-
-
-#: glibc's ``mallopt`` parameters, and the thresholds its adaptive rule reaches at most on 64 bits:
-#: memory under 32 MiB comes from the heap and is kept, up to 64 MiB free at its top.
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
-_MMAP_MOST, _TRIM_MOST = 32 << 20, 64 << 20
-_SET: list[bool] = []
-
-
-def malloc_thresholds() -> bool:
-    """Where ``MALLOC_TRIM_THRESHOLD_`` (or ``MALLOC_MMAP_THRESHOLD_``) fixed glibc's thresholds for this
-    process (Dask's nanny sets 65536), set them once to the most its adaptive rule would reach, so that
-    large temporaries reuse the heap instead of faulting in fresh pages; whether they were set. Not
-    glibc (or not Linux): nothing."""
-    if _SET or not any(name in os.environ for name in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_")):
-        return bool(_SET and _SET[0])
-    done = False
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL("libc.so.6")
-        done = bool(libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_MOST)) and bool(libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_MOST))
-    except (OSError, AttributeError):
-        done = False
-    _SET.append(done)
-    return done
 
 
 def _given(path: str, out_abs: Path, out_dir) -> str:

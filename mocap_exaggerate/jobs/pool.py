@@ -226,6 +226,10 @@ def _worker_start(batch_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     import importlib
 
+    from .memory import keep_freed_memory
+
+    keep_freed_memory()
+
     for module in _PRELOAD:
         importlib.import_module(module)
 
