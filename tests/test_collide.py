@@ -44,6 +44,34 @@ def test_a_hand_put_through_the_chest_is_inside_and_its_way_out_is_away_from_the
     assert np.linalg.norm(away[1]) == pytest.approx(1.0)
 
 
+def test_depths_measured_only_near_a_capsule_are_every_depth_inside():
+    """`penetrations` measures a part against a capsule only on frames where their bounding boxes are within
+    the radius: wherever a part is inside, depth, way out, place along and trunk are those of the deepest
+    capsule, measured on every frame (the two are compared on a clip shaken to put limbs through the body)."""
+    motion = load_bvh(SAMPLE_DIR / "mocapbank_sit_down_stand_up.bvh")
+    limbs = find_limbs(motion.skeleton)
+    pose = motion.world_positions()
+    shaken = pose + np.random.default_rng(5).normal(scale=0.15 * motion.skeleton.height(), size=pose.shape)
+    capsules, parts = body_capsules(limbs, pose), limb_parts(limbs)
+    found = penetrations(shaken, capsules, parts)
+    inside = 0
+    for part in parts:
+        deepest = np.full(len(pose), -np.inf)
+        along = np.zeros(len(pose))
+        for capsule in (c for c in capsules if c.name in part.avoid):
+            q0, q1 = capsule.ends(shaken)
+            s, _, gap = segment_closest(shaken[:, part.a], shaken[:, part.b], q0, q1)
+            depth = capsule.radius - np.linalg.norm(gap, axis=-1)
+            along = np.where(depth > deepest, s, along)
+            deepest = np.maximum(deepest, depth)
+        depth, _, measured_along, _ = found[part.name]
+        assert np.array_equal(depth > 0, deepest > 0), part.name
+        assert np.array_equal(depth[deepest > 0], deepest[deepest > 0]), part.name
+        assert np.array_equal(measured_along[deepest > 0], along[deepest > 0]), part.name
+        inside += int(np.sum(deepest > 0))
+    assert inside > 100  # (the shaking put parts inside on many frames)
+
+
 def test_an_eased_push_covers_every_frame_and_grows_and_fades():
     push = np.zeros((40, 3))
     push[18:22, 0] = 1.0

@@ -142,8 +142,9 @@ def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Par
                  reference: dict | None = None) -> dict[str, tuple]:
     """Per part, how deep it is in the body at each frame: ``(depth (F,), away (F, 3) unit, along (F,),
     trunk (F,) bool)``: the most any of its capsules' radius exceeds the distance between the axes (<= 0:
-    outside), the way out from that capsule's axis at the closest point, where along the part (0 at its
-    first joint), and whether that capsule is the torso, pelvis or head.
+    outside; -inf where the part is clear of every capsule's bounding box, which is not measured), the way
+    out from that capsule's axis at the closest point, where along the part (0 at its first joint), and
+    whether that capsule is the torso, pelvis or head (0 and False where it is outside every capsule).
 
     reference : the capture's `captured_sides`: where the part is near the capsule's
         axis (within half its radius) the way out is then the side the captured part is on, so a part
@@ -161,17 +162,26 @@ def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Par
         along = np.zeros(frames)
         trunk = np.zeros(frames, bool)
         p0, p1 = positions[:, part.a], positions[:, part.b]
+        low, high = np.minimum(p0, p1), np.maximum(p0, p1)
         for name in part.avoid:
             for index, capsule in by_name.get(name, ()):
                 q0, q1 = capsule.ends(positions)
-                s, _, gap = segment_closest(p0, p1, q0, q1)
+                # Only the frames where the part may be within the radius of the axis: the gap between the
+                # two segments' boxes is at most their distance. (Elsewhere the part is outside this capsule,
+                # and its depth, way out and place along it are what another capsule says, or none.)
+                box = np.maximum(np.maximum(np.minimum(q0, q1) - high, low - np.maximum(q0, q1)), 0.0)
+                rows = np.flatnonzero(np.einsum("fc,fc->f", box, box) < capsule.radius**2)
+                if not len(rows):
+                    continue
+                q0, q1 = q0[rows], q1[rows]
+                s, _, gap = segment_closest(p0[rows], p1[rows], q0, q1)
                 distance = np.linalg.norm(gap, axis=-1)
                 # On the axis itself the way out is any way across it.
                 axis = q1 - q0
                 across = np.cross(axis, np.eye(3)[np.argmin(np.abs(axis), axis=-1)])
                 gap = np.where((distance < 1e-12)[:, None], across, gap)
                 if reference is not None:
-                    side = reference[part.name, index]
+                    side = reference[part.name, index][rows]
                     unit = axis / np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-12)
                     side = side - np.sum(side * unit, axis=-1, keepdims=True) * unit
                     # (the captured side where the part is near the axis, its own way out where it is
@@ -179,11 +189,12 @@ def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Par
                     # round and round)
                     known = (np.linalg.norm(side, axis=-1) > 0.05 * capsule.radius) & (distance < 0.5 * capsule.radius)
                     gap = np.where(known[:, None], side, gap)
-                deeper = capsule.radius - distance > depth
-                depth = np.where(deeper, capsule.radius - distance, depth)
-                away = np.where(deeper[:, None], gap / np.maximum(np.linalg.norm(gap, axis=-1), 1e-12)[:, None], away)
-                along = np.where(deeper, s, along)
-                trunk = np.where(deeper, name in ("torso", "pelvis", "head"), trunk)
+                deeper = capsule.radius - distance > depth[rows]
+                depth[rows] = np.where(deeper, capsule.radius - distance, depth[rows])
+                away[rows] = np.where(deeper[:, None], gap / np.maximum(np.linalg.norm(gap, axis=-1), 1e-12)[:, None],
+                                      away[rows])
+                along[rows] = np.where(deeper, s, along[rows])
+                trunk[rows] = np.where(deeper, name in ("torso", "pelvis", "head"), trunk[rows])
         out[part.name] = (depth, away, along, trunk)
     return out
 

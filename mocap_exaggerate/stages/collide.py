@@ -306,7 +306,7 @@ def unbend_hinges(out: np.ndarray, hierarchy, limbs: dict, poles: dict[str, tupl
     done: dict[str, int] = {}
     for name, (pole, captured) in poles.items():
         limb = limbs[name]
-        behind, side = behind_line(out[:, original], limb.joints, pole)
+        behind, side = behind_line(out[:, original[list(limb.joints[:3])]], (0, 1, 2), pole)
         excess = behind - np.maximum(captured, 0.0)
         if not np.any(excess > 0):
             continue
@@ -316,7 +316,12 @@ def unbend_hinges(out: np.ndarray, hierarchy, limbs: dict, poles: dict[str, tupl
         # bent joints already forward further forward, and stretched an arm past the preset's range).
         width = 0.01 * float(np.linalg.norm(out[:, original[limb.end]] - out[:, original[limb.base]], axis=-1).max())
         amount = np.where(excess < width, np.maximum(excess, 0.0) ** 2 / (2 * width), excess - width / 2)
-        move_middle(out, chain_of(tuple(limb.joints)), original[limb.joints[1]], amount[:, None] * side)
+        frames = np.flatnonzero(amount > 0)  # (only these move: the others would add zeros)
+        chain = chain_of(tuple(limb.joints))
+        part = out[frames[:, None], chain]
+        move_middle(part, np.arange(len(chain)), int(np.flatnonzero(chain == original[limb.joints[1]])[0]),
+                    amount[frames, None] * side[frames])
+        out[frames[:, None], chain] = part
     return done
 
 
