@@ -389,12 +389,18 @@ def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray
     scale = np.ones_like(length)
     scale[:, limited] = np.divide(new_length, length[:, limited], out=np.ones_like(new_length),
                                   where=length[:, limited] > 0)
-    if np.all(scale == 1.0):
+    rows = np.flatnonzero(np.any(scale != 1.0, axis=1))  # the frames where something is shortened
+    if not len(rows):
         return positions
-    shift = np.zeros_like(positions)  # each joint's move: its parent's, plus its own link's shortening
+    # Each joint's move: its parent's, plus its own link's shortening (joint by joint, each a contiguous
+    # block of the frames that move).
+    own = np.ascontiguousarray(((scale[rows] - 1.0)[..., None] * vectors[rows]).transpose(1, 0, 2))
+    shift = np.zeros((len(parents), len(rows), 3))
     for joint in range(1, len(parents)):  # parents come before their children
-        shift[:, joint] = shift[:, parents[joint]] + (scale[:, joint - 1, None] - 1.0) * vectors[:, joint - 1]
-    return positions + shift
+        shift[joint] = shift[parents[joint]] + own[joint - 1]
+    out = positions.copy()
+    out[rows] += shift.transpose(1, 0, 2)
+    return out
 
 
 def hanging_links(skeleton, hierarchy, limbs: dict, blend: float) -> tuple[np.ndarray, np.ndarray | float]:
