@@ -806,7 +806,9 @@ def constrain(
         held = np.zeros(heights.shape)
         for joint, weight in pins.items():
             held[:, np.isin(hierarchy.link_child[moving], effectors[joint].chain[-1:])] = weight[:, None]
-        lift = _spread_lift(soft_floor(heights, ground.floor, margin) - heights, ramp, held)
+        lift = soft_floor(heights, ground.floor, margin) - heights
+        low = np.flatnonzero(np.any(lift != 0.0, axis=0))  # the points that come near the floor at all
+        lift[:, low] = _spread_lift(lift[:, low], ramp, held[:, low])  # (the others' stays 0, spread or not)
         out[:, moving, ground.axis] = ground.sign * (heights + lift)
 
     body: dict[str, dict[str, int]] = {}
@@ -957,13 +959,14 @@ def constraints_stage(state: State, plan: ConstraintPlan) -> State:
         max_speed=state.speed_limit,
         riders=rider_joints(skeleton),
     )
-    out = positions.copy()
     # The chains bent to meet their targets, with even sub-links again (each keeping its direction): every
     # limb, not only the chains bent. `even_out` is not a fixed point, and this second pass after the springs'
     # own leaves the skin's edges nearer even (evening only the chains bent, inside `constrain`: 3.48 -> 3.59 %
     # of the MakeHuman body's edges past 2x on the looney boxer, bench/skin.py).
     bent = [j for limb in state.limbs.values() for j in limb.joints[1:]]
-    out[first:] = even_out(result.positions, hierarchy, np.array(bent, dtype=np.int64))
+    out = even_out(result.positions, hierarchy, np.array(bent, dtype=np.int64), in_place=True)  # (constrain's own)
+    if first:
+        out = np.concatenate([positions[:first], out])
     weights = np.zeros((len(positions), len(result.pin_joints)))
     weights[first:] = result.pin_weights
     contacts = {name: [[int(a) + first, int(b) + first] for a, b in runs] for name, runs in result.contacts.items()}

@@ -337,7 +337,7 @@ def springs_stage(state: State, config: SpringConfig) -> State:
     # The lag bunches sub-joints along a limb as well as bending it: make its sub-links even again.
     swung = np.flatnonzero(np.asarray(blend) * active > 0)
     swinging = np.unique(hierarchy.link_child[swung])
-    out[state.first:] = even_out(out[state.first:], hierarchy, swinging)
+    even_out(out[state.first:], hierarchy, swinging, in_place=True)
     # A hand lagging behind a fast elbow stretched a looney forearm to 2.4x (the preset says 2x at
     # most) and tore the skin on it: the lag's stretch is held to max_stretch.
     out[state.first:] = limit_stretch(out[state.first:], positions[state.first:], parents,

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..analysis.branches import minor_branches, rubber_groups
 from ..core.errors import ConfigError, check_flag
+from ..core.kinematics import frame_blocks
 from ..core.settings import Flag, setting
 from ..core.skeleton import POSITION_CHANNELS, Skeleton
 
@@ -349,9 +350,10 @@ def position_subjoints(world_pos: np.ndarray, hierarchy: SubjointHierarchy, rest
     return out
 
 
-def even_out(positions: np.ndarray, hierarchy: SubjointHierarchy, links: np.ndarray) -> np.ndarray:
+def even_out(positions: np.ndarray, hierarchy: SubjointHierarchy, links: np.ndarray, *,
+             in_place: bool = False) -> np.ndarray:
     """``positions`` (F, J', 3) with the sub-links of the links ending at ``links`` (original
-    joints) made even in length, each keeping its direction.
+    joints) made even in length, each keeping its direction (``in_place``: in ``positions`` itself).
 
     The springs' lag bends a limb (the follow-through) and also bunches its sub-joints along it:
     a middle sub-link stretched 2.3x where its link's chord was 1.85x tore the skin on it. Each
@@ -361,7 +363,7 @@ def even_out(positions: np.ndarray, hierarchy: SubjointHierarchy, links: np.ndar
     polyline instead carried them round its corners: a forearm's sub-joints turned 63-72
     degrees in a frame). The original joints and the start joints do not move.
     """
-    out = positions.copy()
+    out = positions if in_place else positions.copy()
     sub = np.flatnonzero(~hierarchy.is_original & (hierarchy.fraction > 0))
     sub = sub[np.isin(hierarchy.link_child[sub], links)]
     if not len(sub):
@@ -375,18 +377,19 @@ def even_out(positions: np.ndarray, hierarchy: SubjointHierarchy, links: np.ndar
         by_size.setdefault(len(members), []).append([head, *members, int(hierarchy.original[child])])
     for rows in by_size.values():
         chain = np.array(rows)  # (L, m + 2): head, sub-joints, tail
-        points = positions[:, chain]  # (F, L, m + 2, 3)
-        steps = np.diff(points, axis=2)
-        lengths = np.sqrt(np.einsum("flkc,flkc->flk", steps, steps))
         fraction = np.concatenate([np.zeros((len(chain), 1)), hierarchy.fraction[chain[:, 1:-1]],
                                    np.ones((len(chain), 1))], axis=1)
         share = np.diff(fraction, axis=1)[None]  # (1, L, m + 1) of the chain's length
-        scale = np.divide(share * lengths.sum(axis=2, keepdims=True), lengths, out=np.zeros_like(lengths),
-                          where=lengths > 0)
-        even = steps * scale[..., None]
-        built = np.cumsum(even, axis=2)[:, :, :-1]  # from the head to each sub-joint
-        miss = (points[:, :, -1] - points[:, :, 0] - even.sum(axis=2))[:, :, None]
-        out[:, chain[:, 1:-1]] = points[:, :, :1] + built + fraction[None, :, 1:-1, None] * miss
+        for part in frame_blocks(len(positions), 4096):  # (each frame on its own: blocks keep memory flat)
+            points = out[part][:, chain]  # (F, L, m + 2, 3); the heads and tails are never moved
+            steps = np.diff(points, axis=2)
+            lengths = np.sqrt(np.einsum("flkc,flkc->flk", steps, steps))
+            scale = np.divide(share * lengths.sum(axis=2, keepdims=True), lengths, out=np.zeros_like(lengths),
+                              where=lengths > 0)
+            even = steps * scale[..., None]
+            built = np.cumsum(even, axis=2)[:, :, :-1]  # from the head to each sub-joint
+            miss = (points[:, :, -1] - points[:, :, 0] - even.sum(axis=2))[:, :, None]
+            out[part, chain[:, 1:-1]] = points[:, :, :1] + built + fraction[None, :, 1:-1, None] * miss
     return out
 
 
