@@ -164,6 +164,7 @@ def recover_orientations(
         starts = rubber.fraction == 0.0
         positions[:, ~starts] = sub_pos
         positions[:, starts] = positions[:, rubber.original[rubber.link_parent[starts]]]
+    del sub_pos, new_pos  # (a long clip's copies, not needed past here)
     return curve_frames(world, positions, rubber), positions
 
 
@@ -264,6 +265,7 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
     angle *= (smootherstep((fold - _FOLDED) / (_UNFOLDED - _FOLDED))
               * smootherstep((np.pi - np.abs(angle)) / (np.pi - _TWIST_FADE)))
     angle = gaussian_average(angle, 1.0, ends="nearest")  # where the fades pass quickly, over a few frames
+    del frame, last, axis, gap, sign, pointing, fold  # (a long clip's temporaries, not needed past here)
     for k in range(1, int(cuts.max())):
         on = np.flatnonzero(cuts > k)
         joint = starts[on] + k
