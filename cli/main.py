@@ -32,6 +32,11 @@ def main() -> None:
     except KeyboardInterrupt:  # before the group's own handling took over (while loading)
         sys.stderr.write("Aborted!\n")
         code = 130
+    except RuntimeError as error:  # Python wraps one pressed while a dataclass is being made
+        if not isinstance(error.__cause__, KeyboardInterrupt):
+            raise
+        sys.stderr.write("Aborted!\n")
+        code = 130
     sys.exit(code if isinstance(code, int) else 0)
 
 

@@ -261,6 +261,25 @@ def test_ctrl_c_lets_running_clips_finish_and_says_what_did_not_start(tmp_path):
     assert 1 <= len(list(out.glob("*.json"))) < 12
 
 
+def test_a_ctrl_c_held_while_workers_start_is_raised_when_they_are_up():
+    from mocap_exaggerate.jobs.pool import _ctrl_c_held
+
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)  # (a test run in the background ignores it)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with _ctrl_c_held():
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.05)  # held: not raised in here
+                inside = True
+        assert inside
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+        assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, [])  # and no longer blocked
+        with _ctrl_c_held():  # nothing pressed: nothing raised
+            pass
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
 @pytest.mark.process
 def test_ctrl_c_while_the_workers_start_is_heard(tmp_path):
     """A Ctrl-C pressed while the forkserver and the workers start (the first half second) ends the

@@ -220,6 +220,20 @@ def test_compiled_formatter_is_built_where_ci_runs():
     assert bvh._compiled is not None, "io/_formatting.c was not built: pip install -e . (setup.py builds it)"
 
 
+def test_the_compiled_formatter_refuses_what_it_cannot_write():
+    """Its buffer holds numbers under 1e9 in a C-contiguous native float64 array; anything else is a ValueError,
+    never a write past its end (1e17 aborted the process before)."""
+    from mocap_exaggerate.io import bvh
+
+    if bvh._compiled is None:
+        pytest.skip("the compiled formatter was not built")
+    for values, rows, cols in [(np.full(64, 1e17), 8, 8), (np.full(2, np.nan), 1, 2), (b"", 2**61, 8),
+                               (np.zeros(8, np.int64), 1, 8), (np.zeros(8, np.float32), 1, 8), (np.zeros(4), 1, 8)]:
+        with pytest.raises((ValueError, BufferError)):
+            bvh._compiled.format_fixed(values, rows, cols, 6)
+    assert bvh.format_fixed(np.array([[1e9, 2.5e10, -0.5]])) == b"1000000000.000000 25000000000.000000 -0.500000\n"
+
+
 def test_both_formatters_write_a_whole_clip_alike(sample_clip):
     from mocap_exaggerate.io import bvh
 

@@ -53,7 +53,7 @@ def _blockwise(function):
     """
 
     def run(*args):
-        arrays = [np.asarray(a, dtype=np.float64) for a in args]
+        arrays = [np.asarray(a) for a in args]  # (the function sees what it always did: its own dtype rules)
         shape = np.broadcast_shapes(*(a.shape[:-1] for a in arrays))  # the leading shape (vectors last)
         if len(shape) < 1 or int(np.prod(shape)) <= 2 * _BLOCK:
             return function(*arrays)

@@ -1,7 +1,7 @@
 /* Fixed-point text for BVH motion lines: the one loop NumPy cannot make fast.
  *
  * format_fixed(values, rows, cols, decimals) -> bytes, where values is a C-contiguous
- * buffer of rows * cols float64. Each number is rounded as NumPy's np.rint(abs(v) * 10**decimals)
+ * buffer of rows * cols native float64 (its format is checked). Each number is rounded as NumPy's np.rint(abs(v) * 10**decimals)
  * (round half to even; one IEEE multiply, so the same integer NumPy computes), written with
  * no minus sign on a zero, numbers separated by one space, rows by one LF, and a final LF.
  * Magnitudes of 1e9 or more are the caller's (io/bvh.py formats them in Python).
@@ -50,18 +50,23 @@ static int write_integer(char *out, uint64_t v) {
 }
 
 static PyObject *format_fixed(PyObject *self, PyObject *args) {
+    PyObject *values_object;
     Py_buffer view;
     Py_ssize_t rows, cols;
     int decimals;
-    if (!PyArg_ParseTuple(args, "y*nni", &view, &rows, &cols, &decimals)) return NULL;
-    if (rows < 0 || cols < 1 || decimals < 0 || decimals > 9 ||
-        view.len != (Py_ssize_t)(rows * cols * (Py_ssize_t)sizeof(double))) {
+    if (!PyArg_ParseTuple(args, "Onni", &values_object, &rows, &cols, &decimals)) return NULL;
+    if (PyObject_GetBuffer(values_object, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) return NULL;
+    /* Per number at most: separator, sign, 9 integer digits (below 1e9), point, decimals. */
+    const Py_ssize_t widest = 12 + decimals;
+    if (view.format == NULL || strcmp(view.format, "d") != 0 || view.itemsize != (Py_ssize_t)sizeof(double) ||
+        rows < 0 || cols < 1 || decimals < 0 || decimals > 9 || rows > (PY_SSIZE_T_MAX - 1) / cols / 24 ||
+        view.len != rows * cols * (Py_ssize_t)sizeof(double)) {
         PyBuffer_Release(&view);
-        PyErr_SetString(PyExc_ValueError, "format_fixed: a buffer of rows * cols float64, 0 <= decimals <= 9");
+        PyErr_SetString(PyExc_ValueError,
+                        "format_fixed: a C-contiguous buffer of rows * cols native float64, 0 <= decimals <= 9");
         return NULL;
     }
-    /* Per number at most: separator, sign, 10 integer digits, point, decimals. */
-    Py_ssize_t most = rows * cols * (13 + decimals) + 1;
+    Py_ssize_t most = rows * cols * widest + 1;
     PyObject *result = PyBytes_FromStringAndSize(NULL, most);
     if (result == NULL) {
         PyBuffer_Release(&view);
@@ -72,13 +77,14 @@ static PyObject *format_fixed(PyObject *self, PyObject *args) {
     const double *values = (const double *)view.buf;
     uint64_t scale = 1;
     for (int i = 0; i < decimals; i++) scale *= 10;
+    const double limit = 1e9 * (double)scale; /* magnitudes of 1e9 or more are the caller's */
     int bad = 0;
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t r = 0; r < rows && !bad; r++) {
         for (Py_ssize_t c = 0; c < cols; c++) {
             double v = values[r * cols + c];
             double units = fabs(v) * (double)scale;
-            if (!(units < 1e18)) { /* NaN, infinite or too large: the caller's job */
+            if (!(units < limit)) { /* NaN, infinite or 1e9 or more: the caller's job */
                 bad = 1;
                 break;
             }
@@ -109,7 +115,7 @@ static PyObject *format_fixed(PyObject *self, PyObject *args) {
     PyBuffer_Release(&view);
     if (bad) {
         Py_DECREF(result);
-        PyErr_SetString(PyExc_ValueError, "format_fixed: a value is not finite or is too large");
+        PyErr_SetString(PyExc_ValueError, "format_fixed: a value is not finite, or is 1e9 or more");
         return NULL;
     }
     if (_PyBytes_Resize(&result, at - out) < 0) return NULL;

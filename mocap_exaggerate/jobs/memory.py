@@ -41,14 +41,20 @@ def _mallopt(*pairs: tuple[int, int]) -> bool:
         return False
 
 
+def _user_set() -> bool:
+    """Whether the user set glibc's allocator themselves (its variables, or its tunables)."""
+    return any(name in os.environ for name in _VARIABLES) or "glibc.malloc." in os.environ.get("GLIBC_TUNABLES", "")
+
+
 def keep_freed_memory() -> bool:
     """Large blocks from the heap (no ``mmap``), and freed memory kept for the next (up to 2 GiB free at the
     heap's top): a long clip's temporaries reuse pages instead of faulting in fresh ones. Threads started
     later share the one heap (a thread's own would keep what it freed from the others: the GLB, built
     beside the BVH, raised a 100,000-frame job's peak by 0.47 GB). For a process that does one job, or a
-    batch's worker; whether it was set."""
+    batch's worker (which keeps its largest clip's pages for the next; `tune` keeps its clip's);
+    whether it was set."""
     if "keep" not in _DONE:
-        _DONE["keep"] = not any(name in os.environ for name in _VARIABLES) and _mallopt(
+        _DONE["keep"] = not _user_set() and _mallopt(
             (_M_MMAP_MAX, 0), (_M_TRIM_THRESHOLD, _KEEP), (_M_ARENA_MAX, 1))
     return _DONE["keep"]
 

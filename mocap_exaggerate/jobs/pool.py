@@ -193,11 +193,12 @@ def _worker_context():
 
 @contextmanager
 def _ctrl_c_held() -> Iterator[None]:
-    """A Ctrl-C pressed while the block runs is held back and raised when it ends, not lost.
+    """A Ctrl-C pressed while the block runs is held back and acted on when it ends, not lost.
 
     Processes started in the block never hear the terminal's Ctrl-C, which is the batch's to handle:
     SIGINT is blocked in this thread, and the mask passes through fork and exec (their imports print
-    no traceback). Where another thread of this process takes the signal instead, a handler notes it.
+    no traceback). Where another thread of this process takes the signal instead, a handler notes it
+    (not where the handler was installed by C code, which Python cannot put back).
     """
     from multiprocessing import resource_tracker
 
@@ -207,16 +208,25 @@ def _ctrl_c_held() -> Iterator[None]:
     # Started first: starting it unblocks SIGINT in this thread (resource_tracker.ensure_running).
     resource_tracker.ensure_running()
     pressed: list[bool] = []
-    before_handler = signal.signal(signal.SIGINT, lambda *_: pressed.append(True))
+    before_handler = signal.getsignal(signal.SIGINT)
+    noting = before_handler is not None
+    if noting:
+        signal.signal(signal.SIGINT, lambda *_: pressed.append(True))
     before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
-        if signal.SIGINT not in before:
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # one pressed meanwhile arrives now
-        signal.signal(signal.SIGINT, before_handler)  # (which first runs the handlers of signals arrived)
-    if pressed and callable(before_handler):
-        before_handler(signal.SIGINT, None)  # Python's own raises KeyboardInterrupt
+        try:
+            if signal.SIGINT not in before:
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # one pressed meanwhile arrives now
+        finally:
+            if noting:
+                signal.signal(signal.SIGINT, before_handler)  # (which first runs the handlers of signals arrived)
+    if pressed:
+        if callable(before_handler):
+            before_handler(signal.SIGINT, None)  # Python's own raises KeyboardInterrupt
+        elif before_handler == signal.SIG_DFL:
+            os.kill(os.getpid(), signal.SIGINT)  # what it would have done: end the process
 
 
 def _worker_start(batch_pid: int) -> None:
