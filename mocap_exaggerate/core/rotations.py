@@ -39,8 +39,9 @@ __all__ = [
 ]
 
 
-#: Elements (leading shape) per block of `_blockwise`: the temporaries of a block stay in the cache.
-_BLOCK = 1 << 14
+#: Elements (of the leading shape: joints' or points' frames) per block that keep a block's NumPy passes
+#: in the CPU's cache: `_blockwise` here, `mocap_exaggerate.core.kinematics.cache_blocks` for frames.
+CACHE_ELEMENTS = 1 << 14
 
 
 def _blockwise(function):
@@ -55,9 +56,9 @@ def _blockwise(function):
     def run(*args):
         arrays = [np.asarray(a) for a in args]  # (the function sees what it always did: its own dtype rules)
         shape = np.broadcast_shapes(*(a.shape[:-1] for a in arrays))  # the leading shape (vectors last)
-        if len(shape) < 1 or int(np.prod(shape)) <= 2 * _BLOCK:
+        if len(shape) < 1 or int(np.prod(shape)) <= 2 * CACHE_ELEMENTS:
             return function(*arrays)
-        rows = max(_BLOCK // max(int(np.prod(shape[1:])), 1), 1)
+        rows = max(CACHE_ELEMENTS // max(int(np.prod(shape[1:])), 1), 1)
         cut = [a.ndim == len(shape) + 1 and a.shape[0] == shape[0] for a in arrays]
         first = function(*(a[:rows] if c else a for a, c in zip(arrays, cut)))
         out = np.empty((shape[0],) + first.shape[1:], dtype=first.dtype)

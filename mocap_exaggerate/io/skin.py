@@ -138,8 +138,7 @@ def open_gltf(path: str | os.PathLike):
 
     label = str(path)
     try:
-        regular_file(path, what="glTF file", label=label)
-        if os.stat(path).st_size > LIMITS["character"]:
+        if regular_file(path, what="glTF file", label=label).st_size > LIMITS["character"]:
             raise InputError(f"is over {LIMITS['character'] >> 30} GiB; a character is read up to that", source=label)
     except OSError as error:
         raise InputError(f"cannot read ({error.strerror or error})", source=label) from None

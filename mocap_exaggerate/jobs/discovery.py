@@ -166,15 +166,11 @@ def check_folders(in_dir: str | os.PathLike, out_dir: str | os.PathLike, pattern
 
 def read_manifest(path: str | os.PathLike) -> dict | None:
     """The manifest at ``path`` as data; None when there is none or it does not read as one."""
-    import stat
+    from ..io.files import LIMITS, read_limited
 
-    path = Path(path)
-    try:
-        info = path.stat()
-        if not stat.S_ISREG(info.st_mode) or info.st_size > 50_000_000:  # (a FIFO named <clip>.json blocked)
-            return None
-        info = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError):  # (a manifest nested a million deep stopped a whole batch)
+    try:  # (a FIFO named <clip>.json blocked; a manifest nested a million deep stopped a whole batch)
+        info = json.loads(read_limited(path, limit=LIMITS["text"], what="manifest").decode("utf-8"))
+    except (OSError, ValueError, RecursionError):  # (InputError is a ValueError)
         return None
     return info if isinstance(info, dict) and info.get("tool") == "mocap_exaggerate" else None
 

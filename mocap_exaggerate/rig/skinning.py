@@ -187,8 +187,7 @@ def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, ma
     first = 0
     # In blocks of about a million (entry, link) rows: a root with hundreds of children stays small.
     while first < len(vertex):
-        last = max(first + 1, int(np.searchsorted(bounds, bounds[first] + _BLOCK_ROWS, "right")) - 1)
-        last = min(max(last, first + 1), len(vertex))
+        last = min(max(first + 1, int(np.searchsorted(bounds, bounds[first] + _BLOCK_ROWS, "right")) - 1), len(vertex))
         block = np.arange(first, last)
         entry = pair_entry[bounds[first]:bounds[last]] - first
         link = pair_link[bounds[first]:bounds[last]]

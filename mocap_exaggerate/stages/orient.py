@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..analysis.branches import effective_lengths, first_above_at_distance, first_below_at_distance, riders
-from ..core.kinematics import frame_blocks, local_from_world
+from ..core.kinematics import cache_blocks, local_from_world
 from ..core.motion import Motion
 from ..core.rotations import quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow, quat_rotate, quat_slerp
 from ..core.timing import gaussian_average, smootherstep, step_gain
@@ -250,7 +250,7 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
     # Every frame on its own but for the twist's easing in time: two passes over blocks of frames, whose
     # chains of quaternion products then stay in the CPU's cache (the same arithmetic as whole clips).
     angle = np.empty((len(out), len(starts)))
-    for part in frame_blocks(len(out), _BLOCK_FRAMES):
+    for part in cache_blocks(len(out), len(starts)):
         frame = out[part, head]
         for on, joint in steps:
             along = positions[part, joint + 1] - positions[part, joint]
@@ -268,17 +268,13 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
         angle[part] = twisted * (smootherstep((fold - _FOLDED) / (_UNFOLDED - _FOLDED))
                                  * smootherstep((np.pi - np.abs(twisted)) / (np.pi - _TWIST_FADE)))
     angle = gaussian_average(angle, 1.0, ends="nearest")  # where the fades pass quickly, over a few frames
-    for part in frame_blocks(len(out), _BLOCK_FRAMES):
+    for part in cache_blocks(len(out), len(starts)):
         for k, (on, joint) in enumerate(steps[1:], start=1):
             # A turn about the sub-link is a turn about the rest direction in the bone's own frame.
             half = 0.5 * angle[part][:, on] * (k / cuts[on])
             twist = np.concatenate([direction[on] * np.sin(half)[..., None], np.cos(half)[..., None]], axis=-1)
             out[part, joint] = quat_normalize(quat_mul(out[part, joint], twist))
     return out
-
-
-#: Frames per block of `curve_frames`' passes.
-_BLOCK_FRAMES = 512
 
 
 # ---------------------------------------------------------------------------- the stage

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..analysis.branches import minor_branches, rubber_groups
 from ..core.errors import ConfigError, check_flag
-from ..core.kinematics import frame_blocks
+from ..core.kinematics import cache_blocks
 from ..core.settings import Flag, setting
 from ..core.skeleton import POSITION_CHANNELS, Skeleton
 
@@ -380,8 +380,7 @@ def even_out(positions: np.ndarray, hierarchy: SubjointHierarchy, links: np.ndar
         fraction = np.concatenate([np.zeros((len(chain), 1)), hierarchy.fraction[chain[:, 1:-1]],
                                    np.ones((len(chain), 1))], axis=1)
         share = np.diff(fraction, axis=1)[None]  # (1, L, m + 1) of the chain's length
-        # (each frame on its own: blocks of about 16,384 points keep memory flat and stay in the cache)
-        for part in frame_blocks(len(positions), max(16384 // chain.size, 16)):
+        for part in cache_blocks(len(positions), chain.size):  # (each frame on its own: memory stays flat)
             points = out[part][:, chain]  # (F, L, m + 2, 3); the heads and tails are never moved
             steps = np.diff(points, axis=2)
             lengths = np.sqrt(np.einsum("flkc,flkc->flk", steps, steps))
