@@ -232,6 +232,9 @@ def test_the_compiled_formatter_refuses_what_it_cannot_write():
         with pytest.raises((ValueError, BufferError)):
             bvh._compiled.format_fixed(values, rows, cols, 6)
     assert bvh.format_fixed(np.array([[1e9, 2.5e10, -0.5]])) == b"1000000000.000000 25000000000.000000 -0.500000\n"
+    # Just under 1e9, rounding up to ten digits: every number one byte longer than nine digits allow.
+    edge = np.full((2000, 50), -999999999.9999996)
+    assert bvh.format_fixed(edge) == ((" ".join(["-1000000000.000000"] * 50) + "\n") * 2000).encode()
 
 
 def test_both_formatters_write_a_whole_clip_alike(sample_clip):

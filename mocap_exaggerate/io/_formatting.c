@@ -56,8 +56,9 @@ static PyObject *format_fixed(PyObject *self, PyObject *args) {
     int decimals;
     if (!PyArg_ParseTuple(args, "Onni", &values_object, &rows, &cols, &decimals)) return NULL;
     if (PyObject_GetBuffer(values_object, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) return NULL;
-    /* Per number at most: separator, sign, 9 integer digits (below 1e9), point, decimals. */
-    const Py_ssize_t widest = 12 + decimals;
+    /* Per number at most: separator (or the row's LF), sign, 10 integer digits (a number below 1e9 may
+     * round up to 1000000000), point, decimals. */
+    const Py_ssize_t widest = 13 + decimals;
     if (view.format == NULL || strcmp(view.format, "d") != 0 || view.itemsize != (Py_ssize_t)sizeof(double) ||
         rows < 0 || cols < 1 || decimals < 0 || decimals > 9 || rows > (PY_SSIZE_T_MAX - 1) / cols / 24 ||
         view.len != rows * cols * (Py_ssize_t)sizeof(double)) {
