@@ -3,6 +3,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mocap_exaggerate.core.rotations import (
+    euler_blocks,
     quat_angle,
     quat_from_euler,
     quat_inv,
@@ -61,6 +62,35 @@ def test_to_euler_without_reference_is_continuous_through_gimbal_lock():
     back = quat_to_euler(q, "ZXY")
     assert np.max(quat_angle(quat_from_euler(back, "ZXY"), q)) < 1e-6
     assert np.max(np.abs(np.diff(back, axis=0))) < 5.0
+
+
+def _spinning_through_locks(frames: int, joints: int, order: str, seed: int) -> np.ndarray:
+    """Rotations that spin past whole turns, switch Euler solution, and sit at gimbal lock,
+    some from the first frame on (their angle comes from a later frame)."""
+    rng = np.random.default_rng(seed)
+    euler = np.cumsum(rng.normal(scale=40.0, size=(frames, joints, 3)), axis=0)
+    locked = rng.random((frames, joints)) < 0.3
+    locked[: frames // 3, 0] = True  # joint 0 starts locked for a third of the clip
+    euler[..., 1] = np.where(locked, 90.0 * rng.choice([-1.0, 1.0], size=(frames, joints)), euler[..., 1])
+    return quat_from_euler(euler, order)
+
+
+@pytest.mark.parametrize("order", ORDERS)
+@pytest.mark.parametrize("block", [1, 3, 64])
+def test_euler_blocks_are_the_whole_clips_angles_bit_for_bit(order, block):
+    # What a frame's choice depends on (the previous pick, the flips and turns so far, the last
+    # angle off gimbal lock, or the first one after) is carried from block to block.
+    q = _spinning_through_locks(200, 4, order, seed=705)
+    whole = quat_to_euler(q, order)
+    assert np.max(np.abs(np.diff(whole, axis=0))) > 90.0 or np.ptp(whole) > 360.0  # the case is not trivial
+    blocks = np.concatenate(list(euler_blocks(q, order, block=block)))
+    assert blocks.view(np.int64).tolist() == whole.view(np.int64).tolist()
+    # Some joints only, taken block by block: the same as those joints converted alone.
+    picked = np.concatenate(list(euler_blocks(q, order, block=block, columns=[3, 0])))
+    assert np.array_equal(picked, quat_to_euler(q[:, [3, 0]], order))
+    reference = quat_to_euler(q, order) + 360.0
+    with_reference = np.concatenate(list(euler_blocks(q, order, reference, block=block)))
+    assert np.array_equal(with_reference, quat_to_euler(q, order, reference=reference))
 
 
 def test_unroll_makes_neighbours_same_hemisphere():

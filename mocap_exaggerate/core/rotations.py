@@ -32,6 +32,7 @@ __all__ = [
     "quat_from_axis_angle",
     "quat_from_euler",
     "quat_to_euler",
+    "euler_blocks",
     "quat_to_matrix",
     "quat_from_matrix",
     "quat_unroll",
@@ -338,75 +339,147 @@ def quat_to_euler(
     q : (F, ..., 4) float64 unit quaternions
     """
     q = np.asarray(q, dtype=np.float64)
-    lead = q.shape[:-1]
-    flat = q.reshape(-1, 4)
-    if len(flat) == 0:
-        return np.zeros(lead + (3,))
-    first = np.empty(lead + (3,))
-    for start in range(0, len(q), 1024):  # the (.., 3, 3) matrices are made a block of frames at a time
-        first[start : start + 1024] = _euler_from_matrix(quat_to_matrix(q[start : start + 1024]), order.upper())
-    locked = np.abs(np.abs(first[..., 1]) - 90.0) < 1e-6
-    if np.any(locked):
-        # At gimbal lock only a combination of the outer angles is fixed. Take
-        # the third angle from the reference, else from the previous unlocked
-        # frame, and solve the first angle for it.
-        if reference is not None:
-            third = np.broadcast_to(reference, first.shape)[..., 2]
-        else:
-            third = _fill_from_unlocked(first[..., 2], locked)
-        first = np.where(locked[..., None], _solve_first_angle(q, first[..., 1], third, order), first)
-    second = first + np.array([180.0, 0.0, 180.0])
-    second[..., 1] = 180.0 - first[..., 1]
-    if reference is not None:
-        reference = np.broadcast_to(np.asarray(reference, dtype=np.float64), first.shape)
-        a = _wrap_near(first, reference)
-        b = _wrap_near(second, reference)
-        pick_b = np.sum(np.abs(b - reference), axis=-1) < np.sum(np.abs(a - reference), axis=-1)
-        chosen = np.where(pick_b[..., None], b, a)
-        # Where the reference itself describes this rotation, keep it exactly:
-        # conversion near gimbal lock loses digits the reference still has.
-        same = quat_angle(quat_from_euler(reference, order), q) < 1e-9
-        return np.where(same[..., None], reference, chosen)
-    if first.ndim < 2 or first.shape[0] < 2:
-        return first
-    # Flip to the other solution where it is nearer the previous frame's pick.
-    # The two solutions map onto each other by an involution that keeps
-    # distances, so whether frame t flips does not depend on earlier picks:
-    # the parity of the flips so far says which solution each frame uses.
-    near_same = np.sum(np.abs(_wrap_near(first[1:], first[:-1]) - first[:-1]), axis=-1)
-    near_other = np.sum(np.abs(_wrap_near(second[1:], first[:-1]) - first[:-1]), axis=-1)
-    flip = near_other < near_same
-    use_second = np.concatenate([np.zeros((1,) + flip.shape[1:], bool), np.cumsum(flip, axis=0) % 2 == 1])
-    chosen = np.where(use_second[..., None], second, first)
-    return _unwrap_degrees(chosen)
+    if q.ndim < 2:  # one rotation, no time axis: a clip of one frame
+        return quat_to_euler(q[None], order, None if reference is None else np.asarray(reference)[None])[0]
+    if q.size == 0:
+        return np.zeros(q.shape[:-1] + (3,))
+    return next(euler_blocks(q, order, reference, block=len(q)))
 
 
-def _unwrap_degrees(angles: np.ndarray) -> np.ndarray:
-    """Add whole turns along axis 0 so no step between neighbours exceeds half a turn.
+def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None, block: int = 1024,
+                 columns: np.ndarray | None = None):
+    """`quat_to_euler` of ``q (F, ..., 4)`` as consecutive blocks of ``block`` frames, each ``(n, ..., 3)``.
 
-    ``np.unwrap(angles, period=360, axis=0)`` without its generality: a
-    quarter of the time on whole clips.
+    The same numbers as on the whole clip at once, bit for bit: what one frame's
+    choice depends on is carried from block to block (the previous frame's
+    solution, the parity of the flips so far, the whole turns added so far, the
+    last angle that was not at gimbal lock). A writer converts a long clip with
+    only a block of angles in memory.
+
+    columns : for ``q (F, J, 4)``, the joints to convert (default all), taken from
+        each block as it comes (no copy of the clip's rotations)
     """
-    step = np.diff(angles, axis=0)
-    turns = np.round(step / 360.0)
-    if not turns.any():
-        return angles
-    out = angles.copy()
-    out[1:] -= 360.0 * np.cumsum(turns, axis=0)
-    return out
+    q = np.asarray(q, dtype=np.float64)
+    frames = q.shape[0]
+    order = order.upper()
+    flat = q.reshape(frames, -1, 4)
+    if reference is not None:
+        reference = np.broadcast_to(np.asarray(reference, dtype=np.float64), q.shape[:-1] + (3,)).reshape(frames, -1, 3)
+    if columns is None:
+        lead, pick = q.shape[:-1], slice(None)
+    else:
+        if q.ndim != 3:
+            raise ValueError(f"columns need quaternions (F, J, 4), got {q.shape}")
+        pick = np.asarray(columns, dtype=np.int64)
+        lead = (frames, len(pick))
+    columns = int(np.prod(lead[1:], dtype=np.int64))
+    source_columns = np.arange(flat.shape[1])[pick]
+    previous = None  # the previous frame's first solution, (M, 3)
+    parity = np.zeros(columns, dtype=np.int64)  # flips so far
+    turns_so_far = np.zeros((columns, 3))  # whole turns taken away so far
+    last_chosen = None  # the previous frame's pick before whole turns, (M, 3)
+    last_third = np.full(columns, np.nan)  # the third angle of the last frame not at gimbal lock
+    for start in range(0, frames, block):
+        part = slice(start, min(start + block, frames))
+        qs = flat[part][:, pick]
+        first = np.empty(qs.shape[:-1] + (3,))
+        for sub in range(0, len(qs), 1024):  # the (.., 3, 3) matrices are made 1,024 frames at a time
+            first[sub : sub + 1024] = _euler_from_matrix(quat_to_matrix(qs[sub : sub + 1024]), order)
+        locked = np.abs(np.abs(first[..., 1]) - 90.0) < 1e-6
+        if np.any(locked):
+            # At gimbal lock only a combination of the outer angles is fixed. Take
+            # the third angle from the reference, else from the previous unlocked
+            # frame (else the next one), and solve the first angle for it.
+            if reference is not None:
+                third = reference[part][:, pick, 2]
+            else:
+                def after(wanted: np.ndarray, stop: int = part.stop) -> np.ndarray:
+                    return _next_unlocked_third(flat, order, stop, source_columns[wanted], block)
+
+                third = _fill_from_unlocked(first[..., 2], locked, last_third, after)
+            first = np.where(locked[..., None], _solve_first_angle(qs, first[..., 1], third, order), first)
+        if reference is None:
+            unlocked = np.flatnonzero(~locked.all(axis=0))
+            if len(unlocked):
+                at = len(locked) - 1 - np.argmax(~locked[::-1, unlocked], axis=0)
+                last_third[unlocked] = first[at, unlocked, 2]
+        second = first + np.array([180.0, 0.0, 180.0])
+        second[..., 1] = 180.0 - first[..., 1]
+        if reference is not None:
+            ref = reference[part][:, pick]
+            a = _wrap_near(first, ref)
+            b = _wrap_near(second, ref)
+            pick_b = np.sum(np.abs(b - ref), axis=-1) < np.sum(np.abs(a - ref), axis=-1)
+            chosen = np.where(pick_b[..., None], b, a)
+            # Where the reference itself describes this rotation, keep it exactly:
+            # conversion near gimbal lock loses digits the reference still has.
+            same = quat_angle(quat_from_euler(ref, order), qs) < 1e-9
+            yield np.where(same[..., None], ref, chosen).reshape(qs.shape[:1] + lead[1:] + (3,))
+            continue
+        # Flip to the other solution where it is nearer the previous frame's pick.
+        # The two solutions map onto each other by an involution that keeps
+        # distances, so whether frame t flips does not depend on earlier picks:
+        # the parity of the flips so far says which solution each frame uses.
+        before = first[:-1] if previous is None else np.concatenate([previous[None], first[:-1]])
+        now, other = (first[1:], second[1:]) if previous is None else (first, second)
+        near_same = np.sum(np.abs(_wrap_near(now, before) - before), axis=-1)
+        near_other = np.sum(np.abs(_wrap_near(other, before) - before), axis=-1)
+        flips = np.cumsum(near_other < near_same, axis=0) + parity
+        if previous is None:
+            flips = np.concatenate([parity[None], flips])
+        chosen = np.where((flips % 2 == 1)[..., None], second, first)
+        previous, parity = first[-1].copy(), flips[-1].copy()
+        # Whole turns: no step between neighbours over half a turn (np.unwrap with
+        # period 360, a quarter of its time).
+        step = np.diff(chosen, axis=0) if last_chosen is None else np.diff(chosen, axis=0, prepend=last_chosen[None])
+        turns = np.cumsum(np.round(step / 360.0), axis=0) + turns_so_far
+        last_chosen = chosen[-1].copy()
+        if len(turns):
+            turns_so_far = turns[-1].copy()
+        if turns.any():
+            chosen = chosen.copy()
+            chosen[len(chosen) - len(turns):] -= 360.0 * turns
+        yield chosen.reshape(qs.shape[:1] + lead[1:] + (3,))
 
 
-def _fill_from_unlocked(values: np.ndarray, locked: np.ndarray) -> np.ndarray:
-    """Replace locked entries along axis 0 by the last unlocked one before (else after, else 0)."""
-    if values.ndim == 0:
-        return np.where(locked, 0.0, values)
+def _fill_from_unlocked(values: np.ndarray, locked: np.ndarray, before: np.ndarray, after) -> np.ndarray:
+    """Replace locked entries along axis 0 by the last unlocked one before (else after, else 0).
+
+    values, locked : (n, M), a block of frames; before : (M,) the last unlocked value
+    of the frames before the block (NaN where none); after : called with the columns
+    that need it, the first unlocked value after the block for each (0 where none).
+    """
     frames = values.shape[0]
-    index = np.where(~locked, np.arange(frames).reshape((-1,) + (1,) * (values.ndim - 1)), -1)
+    index = np.where(~locked, np.arange(frames)[:, None], -1)
     last = np.maximum.accumulate(index, axis=0)
     nxt = np.flip(np.minimum.accumulate(np.flip(np.where(index < 0, frames, index), 0), axis=0), 0)
-    source = np.where(last >= 0, last, nxt)
-    filled = np.take_along_axis(values, np.clip(source, 0, frames - 1), axis=0)
-    return np.where(source < frames, filled, 0.0)
+    filled = np.take_along_axis(values, np.clip(np.where(last >= 0, last, nxt), 0, frames - 1), axis=0)
+    known = ~np.isnan(before)
+    filled = np.where((last < 0) & known, before, filled)
+    missing = (last < 0) & ~known & (nxt >= frames)
+    if missing.any():
+        wanted = np.flatnonzero(missing.any(axis=0))
+        later = np.zeros(values.shape[1])
+        later[wanted] = after(wanted)
+        filled = np.where(missing, later, filled)
+    return filled
+
+
+def _next_unlocked_third(q: np.ndarray, order: str, start: int, columns: np.ndarray, block: int) -> np.ndarray:
+    """The third Euler angle of each column's first frame from ``start`` on that is not at gimbal lock (0 where none)."""
+    found = np.zeros(len(columns))
+    waiting = np.ones(len(columns), dtype=bool)
+    for begin in range(start, len(q), block):
+        if not waiting.any():
+            break
+        angles = _euler_from_matrix(quat_to_matrix(q[begin : begin + block, columns[waiting]]), order)
+        free = np.abs(np.abs(angles[..., 1]) - 90.0) >= 1e-6
+        hit = free.any(axis=0)
+        at = np.argmax(free, axis=0)
+        got = np.flatnonzero(waiting)
+        found[got[hit]] = angles[at[hit], np.flatnonzero(hit), 2]
+        waiting[got[hit]] = False
+    return found
 
 
 def _solve_first_angle(q: np.ndarray, second: np.ndarray, third: np.ndarray, order: str) -> np.ndarray:

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..core.errors import InputError, check_choice
 from ..core.motion import Motion
-from ..core.rotations import quat_from_euler, quat_to_euler
+from ..core.rotations import euler_blocks, quat_from_euler
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .files import atomic_write
 
@@ -611,21 +611,20 @@ def motion_channels(motion: Motion, *, positions: str = "standard") -> np.ndarra
 
 
 def _channel_blocks(motion: Motion, block: int, positions: str = "standard"):
-    """BVH channel values ``(n, C)`` for consecutive blocks of ``block`` frames."""
+    """BVH channel values ``(n, C)`` for consecutive blocks of ``block`` frames.
+
+    The Euler angles are made a block at a time too (`euler_blocks` carries their
+    continuity from block to block): a long clip's angles are never all in memory.
+    """
     skeleton = motion.skeleton
     adds = written_positions(skeleton, positions) == "add"
     frames = motion.num_frames
-    euler = np.zeros((frames, skeleton.num_joints, 3))
     by_order: dict[str, list[int]] = {}
     for j in range(skeleton.num_joints):
         if any(c in ROTATION_CHANNELS for c in skeleton.channels[j]):
             by_order.setdefault(skeleton.rotation_order(j), []).append(j)
-    for order, members in by_order.items():
-        # Joints are independent: a few at a time keeps the temporaries small on long clips.
-        for start in range(0, len(members), 8):
-            some = members[start : start + 8]
-            hint = None if motion.euler_hint is None else motion.euler_hint[:, some]
-            euler[:, some] = quat_to_euler(motion.local_rotations[:, some], order, reference=hint)
+    angles = {order: euler_blocks(motion.local_rotations, order, motion.euler_hint, block, columns=members)
+              for order, members in by_order.items()}
     # Each column: (0 position / 1 angle, joint, component).
     source, joint, component = [], [], []
     for j, names in enumerate(skeleton.channels):
@@ -636,13 +635,17 @@ def _channel_blocks(motion: Motion, block: int, positions: str = "standard"):
             joint.append(j)
             component.append(order.index(name[0]) if rotation else "XYZ".index(name[0]))
     source, joint, component = np.array(source, bool), np.array(joint, np.int64), np.array(component, np.int64)
+    euler = np.zeros((min(block, frames), skeleton.num_joints, 3))
     for start in range(0, frames, block):
         part = slice(start, min(start + block, frames))
-        values = np.empty((part.stop - part.start, len(source)))
+        count = part.stop - part.start
+        for order, members in by_order.items():
+            euler[:count, members] = next(angles[order])
+        values = np.empty((count, len(source)))
         values[:, ~source] = motion.local_positions[part][:, joint[~source], component[~source]]
         if adds:  # the input's own convention, asked for: displacements from the OFFSETs
             values[:, ~source] -= skeleton.offsets[joint[~source], component[~source]]
-        values[:, source] = euler[part][:, joint[source], component[source]]
+        values[:, source] = euler[:count][:, joint[source], component[source]]
         yield values
 
 
