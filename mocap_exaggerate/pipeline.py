@@ -20,6 +20,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -95,7 +96,9 @@ class PipelineResult:
 
     motion : the output Motion (6 channels on every joint)
     world_positions : (F, J_out, 3) float64 positions the output's FK reproduces
-    world_rotations : (F, J_out, 4) float64 orientations it reproduces
+    world_rotations : (F, J_out, 4) float64 orientations (a property: the output's forward
+        kinematics, made when first asked for and kept; a run does not hold them beside the
+        local rotations, 32 bytes a joint a frame)
     original_index : (J,) int, where each original joint is in the output skeleton
     hierarchy : the rubber skeleton written out, with each cut link's start joint
         (`mocap_exaggerate.stages.subjoints.link_starts`); None when sub-joints were off
@@ -114,7 +117,6 @@ class PipelineResult:
 
     motion: Motion
     world_positions: np.ndarray
-    world_rotations: np.ndarray
     original_index: np.ndarray
     hierarchy: SubjointHierarchy | None
     rest_frames: int
@@ -130,6 +132,11 @@ class PipelineResult:
     stages: list[str] = field(default_factory=list)
     constraints: dict | None = None
     preserve_volume: bool = True
+
+    @cached_property
+    def world_rotations(self) -> np.ndarray:
+        """(F, J_out, 4) float64 world orientations of the output (its forward kinematics)."""
+        return self.motion.world_rotations()
 
     @property
     def first(self) -> int:
@@ -191,7 +198,6 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
     return PipelineResult(
         motion=state.output.motion,
         world_positions=state.output.world_positions,
-        world_rotations=state.output.world_rotations,
         original_index=state.output.original_index,
         hierarchy=link_starts(state.hierarchy) if state.hierarchy is not None else None,
         rest_frames=state.rest_frames,

@@ -41,17 +41,21 @@ def forward_kinematics(
 
 
 def local_from_world(
-    parents: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray
+    parents: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray, *, overwrite_rotations: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """Local rotations ``(F, J, 4)`` and translations ``(F, J, 3)`` from world transforms.
 
     The inverse of `forward_kinematics`, loop-free: each joint's transform
-    in its parent's frame.
+    in its parent's frame. With ``overwrite_rotations`` the local rotations are
+    written over ``world_rot`` (a float64 array), a block of frames at a time
+    (each block read whole before it is written): a long clip's copy saved.
     """
     parents = np.asarray(parents)
+    if overwrite_rotations and not (isinstance(world_rot, np.ndarray) and world_rot.dtype == np.float64):
+        raise TypeError("overwrite_rotations needs world_rot as a float64 array")
     world_rot = np.asarray(world_rot, dtype=np.float64)
     world_pos = np.asarray(world_pos, dtype=np.float64)
-    local_rot = np.empty(world_rot.shape)
+    local_rot = world_rot if overwrite_rotations else np.empty(world_rot.shape)
     local_pos = np.empty(world_pos.shape)
     local_rot[:, 0] = world_rot[:, 0]
     local_pos[:, 0] = world_pos[:, 0]

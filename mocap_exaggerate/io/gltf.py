@@ -281,12 +281,8 @@ def glb_pieces(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
     # Animation: one translation and one rotation sampler per joint.
     times = (np.arange(motion.num_frames) * motion.frame_time).astype(np.float32)
     time_accessor = buffer.add(times, "SCALAR", gl.FLOAT, bounds=True)
-    node_scale = parent_world = None
     if thickness is not None:
         thickness = np.asarray(thickness, dtype=np.float64)
-        parent_world = np.ones_like(thickness)
-        parent_world[:, 1:] = thickness[:, skeleton.parents[1:]]
-        node_scale = thickness / parent_world
     samplers, channels = [], []
     for j in range(skeleton.num_joints):
         # Joint by joint: float32 tracks made one at a time keep long clips' memory flat.
@@ -297,11 +293,14 @@ def glb_pieces(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
             translation = translation @ turn.T
         rotation = quat_unroll(rotation, axis=0)
         rotation = (rotation / np.linalg.norm(rotation, axis=-1, keepdims=True)).astype(np.float32)
-        if parent_world is not None:
-            translation = translation / parent_world[:, j, None]
+        node_scale = None
+        if thickness is not None:  # joint by joint too: no (F, J) arrays beside the thickness
+            parent_world = thickness[:, skeleton.parents[j]] if j > 0 else np.ones(motion.num_frames)
+            translation = translation / parent_world[:, None]
+            node_scale = thickness[:, j] / parent_world
         tracks = [("translation", translation.astype(np.float32), "VEC3"), ("rotation", rotation, "VEC4")]
-        if node_scale is not None and np.any(np.abs(node_scale[:, j] - 1.0) > 1e-6):
-            tracks.append(("scale", np.repeat(node_scale[:, j, None], 3, axis=1).astype(np.float32), "VEC3"))
+        if node_scale is not None and np.any(np.abs(node_scale - 1.0) > 1e-6):
+            tracks.append(("scale", np.repeat(node_scale[:, None], 3, axis=1).astype(np.float32), "VEC3"))
         for path, values, kind in tracks:
             output = buffer.add(values, kind, gl.FLOAT)
             samplers.append(gl.AnimationSampler(input=time_accessor, output=output, interpolation="LINEAR"))

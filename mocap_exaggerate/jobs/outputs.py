@@ -14,6 +14,7 @@ import numpy as np
 from .. import __version__
 from ..config import PipelineConfig
 from ..core.errors import ConfigError
+from ..core.kinematics import cache_blocks
 from ..core.motion import Motion
 from ..io.bvh import written_positions
 from ..pipeline import PipelineResult
@@ -105,27 +106,32 @@ def output_thickness(result: PipelineResult) -> np.ndarray | None:
     rubber = hierarchy is not None and skeleton is hierarchy.skeleton
     if rubber:
         parents = hierarchy.link_parent[hierarchy.original]
-        positions = result.world_positions[:, hierarchy.original]
+        originals = hierarchy.original
         rest = skeleton.rest_positions()[hierarchy.original]
     else:
         parents = np.asarray(skeleton.parents)
-        positions = result.world_positions
+        originals = slice(None)
         rest = skeleton.rest_positions()
     count = len(parents)
     length = np.linalg.norm(rest - rest[np.maximum(parents, 0)], axis=1)
     child = np.flatnonzero((parents >= 0) & (length > 1e-9 * max(skeleton.height(), 1e-12)))
-    log_stretch = np.zeros((len(positions), count))
-    log_stretch[:, child] = np.log(np.maximum(
-        np.linalg.norm(positions[:, child] - positions[:, parents[child]], axis=-1) / length[child], 1e-6))
-    total = np.zeros((len(positions), count))
-    np.add.at(total.T, parents[child], log_stretch[:, child].T)
-    outgoing = total / np.maximum(np.bincount(parents[child], minlength=count), 1)
-    if rubber:
-        link = hierarchy.link_child
-        along = np.where(hierarchy.is_original[None, :], outgoing[:, link], log_stretch[:, link])
-    else:
-        along = outgoing
-    thickness = np.clip(np.exp(-0.5 * along), *THICKNESS)
+    frames = len(result.world_positions)
+    thickness = np.empty((frames, skeleton.num_joints))
+    # Every step is per frame: in blocks of frames, a long clip's temporaries stay small.
+    for part in cache_blocks(frames, 8 * skeleton.num_joints):
+        positions = result.world_positions[part][:, originals]
+        log_stretch = np.zeros((part.stop - part.start, count))
+        log_stretch[:, child] = np.log(np.maximum(
+            np.linalg.norm(positions[:, child] - positions[:, parents[child]], axis=-1) / length[child], 1e-6))
+        total = np.zeros((part.stop - part.start, count))
+        np.add.at(total.T, parents[child], log_stretch[:, child].T)
+        outgoing = total / np.maximum(np.bincount(parents[child], minlength=count), 1)
+        if rubber:
+            link = hierarchy.link_child
+            along = np.where(hierarchy.is_original[None, :], outgoing[:, link], log_stretch[:, link])
+        else:
+            along = outgoing
+        thickness[part] = np.clip(np.exp(-0.5 * along), *THICKNESS)
     thickness[np.abs(thickness - 1.0) <= 1e-6] = 1.0
     return None if np.all(thickness == 1.0) else thickness
 

@@ -43,6 +43,7 @@ import numpy as np
 
 from ..analysis.limbs import limb_hinges
 from ..core.errors import ConfigError, check_flag, check_number
+from ..core.kinematics import cache_blocks
 from ..core.settings import Flag, setting
 from ..core.timing import check_duration, parse_duration, smootherstep, spread_max
 from .bends import keep_bends
@@ -344,5 +345,9 @@ def max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.nda
     long_links[0] = False
     if not long_links.any():
         return 1.0
-    current = np.linalg.norm(positions[:, long_links] - positions[:, parents[long_links]], axis=-1)
-    return float((current / lengths[long_links]).max())
+    links, ends = np.flatnonzero(long_links), parents[long_links]
+    largest = 0.0
+    for part in cache_blocks(len(positions), 8 * len(links)):  # no (F, links, 3) temporaries on a long clip
+        current = np.linalg.norm(positions[part][:, links] - positions[part][:, ends], axis=-1)
+        largest = max(largest, float((current / lengths[long_links]).max()))
+    return largest

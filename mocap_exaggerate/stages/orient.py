@@ -43,9 +43,12 @@ if TYPE_CHECKING:
 __all__ = ["recover_orientations", "curve_frames", "motion_from_world", "orient_stage"]
 
 
-def motion_from_world(world_pos, world_rot, skeleton, frame_time, euler_hint=None) -> Motion:
-    """A Motion whose local 6-DOF channels reproduce world transforms ``(F, J, 3)`` and ``(F, J, 4)``."""
-    local_rot, local_pos = local_from_world(skeleton.parents, world_rot, world_pos)
+def motion_from_world(world_pos, world_rot, skeleton, frame_time, euler_hint=None, *,
+                      overwrite_rotations: bool = False) -> Motion:
+    """A Motion whose local 6-DOF channels reproduce world transforms ``(F, J, 3)`` and ``(F, J, 4)``
+    (its local rotations written over ``world_rot`` with ``overwrite_rotations``, `local_from_world`)."""
+    local_rot, local_pos = local_from_world(skeleton.parents, world_rot, world_pos,
+                                            overwrite_rotations=overwrite_rotations)
     return Motion(skeleton, frame_time, local_rot, local_pos, euler_hint)
 
 
@@ -288,14 +291,17 @@ def orient_stage(state: State, config: OutputConfig) -> State:
     sub_rot, sub_pos = recover_orientations(positions, hierarchy, motion, state.captured_rot, state.captured_pos,
                                             state.pins, max_speed=state.speed_limit)
     rubber = link_starts(hierarchy)  # the skeleton sub_rot and sub_pos are on
+    # The world rotations become the local ones in place: the output's FK gives them back
+    # (`PipelineResult.world_rotations`), and a long clip does not hold both.
     if config.skeleton == "original":
         keep = rubber.original
-        out_pos, out_rot = sub_pos[:, keep], sub_rot[:, keep]
-        out = motion_from_world(out_pos, out_rot, motion.skeleton.with_full_channels(), motion.frame_time,
-                                motion.euler_hint)
+        out_pos = sub_pos[:, keep]
+        out = motion_from_world(out_pos, sub_rot[:, keep], motion.skeleton.with_full_channels(), motion.frame_time,
+                                motion.euler_hint, overwrite_rotations=True)
         original_index = np.arange(motion.skeleton.num_joints)
     else:
-        out_pos, out_rot = sub_pos, sub_rot
-        out = motion_from_world(out_pos, out_rot, rubber.skeleton, motion.frame_time)
+        out_pos = sub_pos
+        out = motion_from_world(out_pos, sub_rot, rubber.skeleton, motion.frame_time, overwrite_rotations=True)
         original_index = rubber.original
-    return replace(state, output=Output(out, out_pos, out_rot, original_index))
+    del sub_rot
+    return replace(state, output=Output(out, out_pos, original_index))

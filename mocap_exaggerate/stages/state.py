@@ -68,11 +68,11 @@ class Pins(NamedTuple):
 
 
 class Output(NamedTuple):
-    """The output skeleton's motion and the world transforms its FK reproduces."""
+    """The output skeleton's motion and the world positions its FK reproduces (its world rotations
+    are its FK's: `PipelineResult.world_rotations`)."""
 
     motion: Motion
     world_positions: np.ndarray  # (F, J_out, 3)
-    world_rotations: np.ndarray  # (F, J_out, 4)
     original_index: np.ndarray  # (J,) where each original joint is in the output skeleton
 
 
