@@ -26,6 +26,7 @@ import numpy as np
 
 from ..analysis.limbs import limb_hinges, limb_joints
 from ..core.errors import ConfigError, check_flag, check_number
+from ..core.kinematics import frame_blocks
 from ..core.settings import Flag, setting
 from ..core.timing import smootherstep, soft_limit
 from .bends import keep_bends_on_rubber
@@ -340,8 +341,8 @@ def springs_stage(state: State, config: SpringConfig) -> State:
     even_out(out[state.first:], hierarchy, swinging, in_place=True)
     # A hand lagging behind a fast elbow stretched a looney forearm to 2.4x (the preset says 2x at
     # most) and tore the skin on it: the lag's stretch is held to max_stretch.
-    out[state.first:] = limit_stretch(out[state.first:], positions[state.first:], parents,
-                                      hierarchy.skeleton.link_lengths(), swung, config.max_stretch)
+    limit_stretch(out[state.first:], positions[state.first:], parents, hierarchy.skeleton.link_lengths(), swung,
+                  config.max_stretch, in_place=True)
     substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
     carried = stable_link_stiffness(frame_time, config.link_stiffness, links.degree, substeps)
     notes = state.notes
@@ -360,7 +361,7 @@ LIMIT_ROOM = 0.2
 
 
 def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray, rest: np.ndarray,
-                  links: np.ndarray, most: float) -> np.ndarray:
+                  links: np.ndarray, most: float, *, in_place: bool = False) -> np.ndarray:
     """``positions`` (F, J, 3) with the links ending at ``links`` no longer than ``most`` times their
     ``rest`` length, or than in ``before`` (F, J, 3) where that is longer; everything below follows.
 
@@ -371,18 +372,28 @@ def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray
     - 1) rest``, or up to its length before, whichever is more, and eases above that (a tanh, so the
     length and its speed stay continuous) into ``most * rest``, or into ``LIMIT_ROOM (most - 1)
     rest`` past where it starts to give where that is more (a link a strike had already made 2x
-    long may swing a little past it rather than be clipped flat).
+    long may swing a little past it rather than be clipped flat). ``in_place``: ``positions`` itself is
+    changed and returned (a float64 array or a view of one).
     """
     if not len(links):
         return positions
-    vectors = positions[:, 1:] - positions[:, parents[1:]]
-    length = np.sqrt(np.einsum("fjc,fjc->fj", vectors, vectors))
+    out = positions if in_place else positions.copy()
     limited = np.zeros(len(parents), bool)
     limited[links] = True
     limited = limited[1:]
-    had = np.linalg.norm(before[:, 1:][:, limited] - before[:, parents[1:][limited]], axis=-1)
     rest = rest[1:][limited]
     way = (most - 1.0) * rest
+    for part in frame_blocks(len(out), 4096):  # per frame: in blocks, a long clip's temporaries stay small
+        _limit_block(out[part], before[part], parents, limited, rest, way, most)
+    return out
+
+
+def _limit_block(positions: np.ndarray, before: np.ndarray, parents: np.ndarray, limited: np.ndarray,
+                 rest: np.ndarray, way: np.ndarray, most: float) -> None:
+    """`limit_stretch` on a block of frames, in place."""
+    vectors = positions[:, 1:] - positions[:, parents[1:]]
+    length = np.sqrt(np.einsum("fjc,fjc->fj", vectors, vectors))
+    had = np.linalg.norm(before[:, 1:][:, limited] - before[:, parents[1:][limited]], axis=-1)
     knee = np.maximum(had, rest + LIMIT_KNEE * way)
     top = np.maximum(most * rest, knee + LIMIT_ROOM * way)
     new_length = soft_limit(length[:, limited], knee, top)
@@ -391,16 +402,14 @@ def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray
                                   where=length[:, limited] > 0)
     rows = np.flatnonzero(np.any(scale != 1.0, axis=1))  # the frames where something is shortened
     if not len(rows):
-        return positions
+        return
     # Each joint's move: its parent's, plus its own link's shortening (joint by joint, each a contiguous
     # block of the frames that move).
     own = np.ascontiguousarray(((scale[rows] - 1.0)[..., None] * vectors[rows]).transpose(1, 0, 2))
     shift = np.zeros((len(parents), len(rows), 3))
     for joint in range(1, len(parents)):  # parents come before their children
         shift[joint] = shift[parents[joint]] + own[joint - 1]
-    out = positions.copy()
-    out[rows] += shift.transpose(1, 0, 2)
-    return out
+    positions[rows] += shift.transpose(1, 0, 2)
 
 
 def hanging_links(skeleton, hierarchy, limbs: dict, blend: float) -> tuple[np.ndarray, np.ndarray | float]:
