@@ -58,7 +58,7 @@ FPS_RANGE = (1.0, 10000.0)
 #: 2,000-joint star converts in about 6 s (10,000 took 30 s, and before issue 28 never ended).
 MAX_DEPTH = 1000
 MAX_JOINTS = 2000
-#: Most frames read: 500,000 is 69 minutes at 120 fps, past any take; a run holds about 22 kB a frame
+#: Most frames read: 500,000 is 69 minutes at 120 fps, past any take; a run holds 17-20 kB a frame
 #: of a 31-joint rig at its peak, so a longer clip is cut into takes first (refused in one line before any work).
 MAX_FRAMES = 500_000
 
