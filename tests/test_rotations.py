@@ -99,3 +99,21 @@ def test_unroll_makes_neighbours_same_hemisphere():
     out = quat_unroll(q)
     assert np.all(np.sum(out[1:] * out[:-1], axis=-1) > 0)
     assert np.allclose(np.abs(np.sum(out * q, axis=-1)), 1.0)
+
+
+@pytest.mark.parametrize("order", ORDERS)
+def test_euler_from_quaternions_reads_the_matrix_entries_bit_for_bit(order):
+    # The writer makes only the five matrix entries the angles read, each by quat_to_matrix's own expression.
+    from mocap_exaggerate.core.rotations import _euler_from_quat, quat_normalize, quat_to_matrix
+
+    q = quat_normalize(np.random.default_rng(706).normal(size=(2000, 3, 4)))
+    q[:10] = quat_from_euler(np.array([30.0, 90.0, -20.0]), order)  # gimbal lock
+    m = quat_to_matrix(q)  # the whole matrix, and the angles read from it
+    i, j, k = ("XYZ".index(a) for a in order)
+    s = 1.0 if (j - i) % 3 == 1 else -1.0
+    b = np.arctan2(s * m[..., i, k], np.hypot(m[..., i, i], m[..., i, j]))
+    a = np.arctan2(-s * m[..., j, k], m[..., k, k])
+    c = np.arctan2(-s * m[..., i, j], m[..., i, i])
+    assert _euler_from_quat(q, order).tobytes() == np.degrees(np.stack([a, b, c], axis=-1)).tobytes()
+    # A known answer: 30 degrees about the first axis alone.
+    assert np.allclose(_euler_from_quat(quat_from_euler(np.array([[30.0, 0.0, 0.0]]), order), order), [[30.0, 0, 0]])

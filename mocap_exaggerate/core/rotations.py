@@ -307,20 +307,29 @@ def quat_from_matrix(matrix: np.ndarray) -> np.ndarray:
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
-def _euler_from_matrix(matrix: np.ndarray, order: str) -> np.ndarray:
-    """Intrinsic Tait-Bryan angles in degrees for ``R = R_i(a) R_j(b) R_k(c)``, order ``"ijk"``.
+def _euler_from_quat(q: np.ndarray, order: str) -> np.ndarray:
+    """Intrinsic Tait-Bryan angles in degrees for ``R = R_i(a) R_j(b) R_k(c)``, order ``"ijk"``, of unit quaternions.
 
-    ``b = asin(s R[i, k])``, ``a = atan2(-s R[j, k], R[k, k])``,
-    ``c = atan2(-s R[i, j], R[i, i])`` with ``s`` the parity of the axis
-    permutation; ``b`` is taken by atan2 too, which keeps its digits near
-    90 degrees. At gimbal lock ``a`` and ``c`` are arbitrary: callers settle them.
+    With ``R`` the quaternion's matrix: ``b = asin(s R[i, k])``, ``a = atan2(-s R[j, k], R[k, k])``,
+    ``c = atan2(-s R[i, j], R[i, i])`` with ``s`` the parity of the axis permutation; ``b`` is taken
+    by atan2 too, which keeps its digits near 90 degrees. At gimbal lock ``a`` and ``c`` are
+    arbitrary: callers settle them. Only the five entries of ``R`` read are made, each by
+    `quat_to_matrix`'s own expression (the same bits as from the whole matrix, 40 % less work).
     """
+    x, y, z, w = _parts(q)
+    entries = {
+        (0, 0): lambda: 1.0 - 2.0 * (y * y + z * z), (0, 1): lambda: 2.0 * (x * y - z * w),
+        (0, 2): lambda: 2.0 * (x * z + y * w), (1, 0): lambda: 2.0 * (x * y + z * w),
+        (1, 1): lambda: 1.0 - 2.0 * (x * x + z * z), (1, 2): lambda: 2.0 * (y * z - x * w),
+        (2, 0): lambda: 2.0 * (x * z - y * w), (2, 1): lambda: 2.0 * (y * z + x * w),
+        (2, 2): lambda: 1.0 - 2.0 * (x * x + y * y),
+    }
     i, j, k = ("XYZ".index(a) for a in order)
     sign = 1.0 if (j - i) % 3 == 1 else -1.0
-    m = matrix
-    b = np.arctan2(sign * m[..., i, k], np.hypot(m[..., i, i], m[..., i, j]))
-    a = np.arctan2(-sign * m[..., j, k], m[..., k, k])
-    c = np.arctan2(-sign * m[..., i, j], m[..., i, i])
+    ii, ij = entries[i, i](), entries[i, j]()
+    b = np.arctan2(sign * entries[i, k](), np.hypot(ii, ij))
+    a = np.arctan2(-sign * entries[j, k](), entries[k, k]())
+    c = np.arctan2(-sign * ij, ii)
     return np.degrees(np.stack([a, b, c], axis=-1))
 
 
@@ -383,8 +392,8 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
         part = slice(start, min(start + block, frames))
         qs = flat[part][:, pick]
         first = np.empty(qs.shape[:-1] + (3,))
-        for sub in range(0, len(qs), 1024):  # the (.., 3, 3) matrices are made 1,024 frames at a time
-            first[sub : sub + 1024] = _euler_from_matrix(quat_to_matrix(qs[sub : sub + 1024]), order)
+        for sub in range(0, len(qs), 1024):  # 1,024 frames at a time: small temporaries on a whole clip
+            first[sub : sub + 1024] = _euler_from_quat(qs[sub : sub + 1024], order)
         locked = np.abs(np.abs(first[..., 1]) - 90.0) < 1e-6
         if np.any(locked):
             # At gimbal lock only a combination of the outer angles is fixed. Take
@@ -472,7 +481,7 @@ def _next_unlocked_third(q: np.ndarray, order: str, start: int, columns: np.ndar
     for begin in range(start, len(q), block):
         if not waiting.any():
             break
-        angles = _euler_from_matrix(quat_to_matrix(q[begin : begin + block, columns[waiting]]), order)
+        angles = _euler_from_quat(q[begin : begin + block, columns[waiting]], order)
         free = np.abs(np.abs(angles[..., 1]) - 90.0) >= 1e-6
         hit = free.any(axis=0)
         at = np.argmax(free, axis=0)
