@@ -117,3 +117,10 @@ def test_euler_from_quaternions_reads_the_matrix_entries_bit_for_bit(order):
     assert _euler_from_quat(q, order).tobytes() == np.degrees(np.stack([a, b, c], axis=-1)).tobytes()
     # A known answer: 30 degrees about the first axis alone.
     assert np.allclose(_euler_from_quat(quat_from_euler(np.array([[30.0, 0.0, 0.0]]), order), order), [[30.0, 0, 0]])
+
+
+def test_sum_of_three_is_numpys_sum_bit_for_bit():
+    from mocap_exaggerate.core.rotations import _sum3
+
+    values = np.abs(np.random.default_rng(707).normal(size=(4000, 3)) * np.logspace(-8, 8, 4000)[:, None])
+    assert _sum3(values).tobytes() == np.sum(values, axis=-1).tobytes()
