@@ -124,3 +124,16 @@ def test_sum_of_three_is_numpys_sum_bit_for_bit():
 
     values = np.abs(np.random.default_rng(707).normal(size=(4000, 3)) * np.logspace(-8, 8, 4000)[:, None])
     assert _sum3(values).tobytes() == np.sum(values, axis=-1).tobytes()
+
+
+@pytest.mark.parametrize("length", [1, 2, 3, 4, 7, 8])
+def test_vector_norm_is_numpys_norm_bit_for_bit(length):
+    # Every stage measures lengths with it: NumPy's own bits, on any layout (and whole blocks in the cache).
+    from mocap_exaggerate.core.rotations import vector_norm
+
+    rng = np.random.default_rng(708)
+    base = rng.normal(size=(300, 120, length)) * np.exp(5.0 * rng.normal(size=(300, 120, length)))
+    for v in (base, base[::3], np.swapaxes(base, 0, 1), np.asfortranarray(base), base[0], base[0, 0]):
+        assert vector_norm(v).tobytes() == np.linalg.norm(v, axis=-1).tobytes()
+        assert vector_norm(v, keepdims=True).shape == np.linalg.norm(v, axis=-1, keepdims=True).shape
+    assert vector_norm(np.array([[3, 4]])).tolist() == [5.0]  # integers: NumPy's norm

@@ -25,6 +25,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..core.rotations import vector_norm
+
 __all__ = ["Capsule", "Part", "body_capsules", "limb_parts", "segment_closest", "captured_sides", "penetrations",
            "inside_body"]
 
@@ -60,7 +62,7 @@ def _width(positions: np.ndarray, limbs: dict, kind: str) -> float:
     left, right = limbs.get(f"left_{kind}"), limbs.get(f"right_{kind}")
     if left is None or right is None:
         return 0.0
-    return float(np.median(np.linalg.norm(positions[:, left.base] - positions[:, right.base], axis=-1)))
+    return float(np.median(vector_norm(positions[:, left.base] - positions[:, right.base])))
 
 
 def body_capsules(limbs: dict, positions: np.ndarray) -> list[Capsule]:
@@ -176,23 +178,23 @@ def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Par
                     continue
                 q0, q1 = q0[rows], q1[rows]
                 s, _, gap = segment_closest(p0[rows], p1[rows], q0, q1)
-                distance = np.linalg.norm(gap, axis=-1)
+                distance = vector_norm(gap)
                 # On the axis itself the way out is any way across it.
                 axis = q1 - q0
                 across = np.cross(axis, np.eye(3)[np.argmin(np.abs(axis), axis=-1)])
                 gap = np.where((distance < 1e-12)[:, None], across, gap)
                 if reference is not None:
                     side = reference[part.name, index][rows]
-                    unit = axis / np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-12)
+                    unit = axis / np.maximum(vector_norm(axis, keepdims=True), 1e-12)
                     side = side - np.sum(side * unit, axis=-1, keepdims=True) * unit
                     # (the captured side where the part is near the axis, its own way out where it is
                     # clearly on one side: pushed back across the body to the captured side it went
                     # round and round)
-                    known = (np.linalg.norm(side, axis=-1) > 0.05 * capsule.radius) & (distance < 0.5 * capsule.radius)
+                    known = (vector_norm(side) > 0.05 * capsule.radius) & (distance < 0.5 * capsule.radius)
                     gap = np.where(known[:, None], side, gap)
                 deeper = capsule.radius - distance > depth[rows]
                 depth[rows] = np.where(deeper, capsule.radius - distance, depth[rows])
-                away[rows] = np.where(deeper[:, None], gap / np.maximum(np.linalg.norm(gap, axis=-1), 1e-12)[:, None],
+                away[rows] = np.where(deeper[:, None], gap / np.maximum(vector_norm(gap), 1e-12)[:, None],
                                       away[rows])
                 along[rows] = np.where(deeper, s, along[rows])
                 trunk[rows] = np.where(deeper, name in ("torso", "pelvis", "head"), trunk[rows])

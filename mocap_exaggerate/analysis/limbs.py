@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.rotations import quat_inv, quat_rotate
+from ..core.rotations import quat_inv, quat_rotate, vector_norm
 from ..core.skeleton import Skeleton
 from ..core.timing import smootherstep
 
@@ -321,7 +321,7 @@ def torso_joints(skeleton: Skeleton, limbs: dict) -> np.ndarray:
 def offset_from_line(base: np.ndarray, middle: np.ndarray, end: np.ndarray) -> np.ndarray:
     """(F, 3) the middle joint's offset from the base-to-end line: where the chain bends, and how far."""
     line = end - base
-    line = line / np.maximum(np.linalg.norm(line, axis=-1), 1e-12)[:, None]
+    line = line / np.maximum(vector_norm(line), 1e-12)[:, None]
     away = middle - base
     return away - np.sum(away * line, axis=-1, keepdims=True) * line
 
@@ -336,8 +336,8 @@ def hinge_pole(chain: np.ndarray, base_rotation: np.ndarray) -> np.ndarray | Non
     long. None for a chain that never bends.
     """
     own = offset_from_line(chain[:, 0], chain[:, 1], chain[:, 2])
-    upper = np.maximum(np.linalg.norm(chain[:, 1] - chain[:, 0], axis=-1), 1e-12)
-    bent = np.linalg.norm(own, axis=-1) / upper
+    upper = np.maximum(vector_norm(chain[:, 1] - chain[:, 0]), 1e-12)
+    bent = vector_norm(own) / upper
     local = quat_rotate(quat_inv(base_rotation), own)
     usual = np.sum(local * bent[:, None], axis=0)  # weighted by how clearly each frame bends
     if np.linalg.norm(usual) < 1e-9 * len(chain):
@@ -353,7 +353,7 @@ def behind_line(positions: np.ndarray, joints, pole: np.ndarray) -> tuple[np.nda
     base, middle, end = (positions[:, j] for j in joints)
     offset = offset_from_line(base, middle, end)
     line = end - base
-    line = line / np.maximum(np.linalg.norm(line, axis=-1, keepdims=True), 1e-12)
+    line = line / np.maximum(vector_norm(line, keepdims=True), 1e-12)
     side = pole - np.sum(pole * line, axis=-1, keepdims=True) * line
-    side = side / np.maximum(np.linalg.norm(side, axis=-1, keepdims=True), 1e-12)
+    side = side / np.maximum(vector_norm(side, keepdims=True), 1e-12)
     return -np.sum(offset * side, axis=-1), side

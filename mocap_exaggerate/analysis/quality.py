@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.motion import Motion
-from ..core.rotations import quat_angle
+from ..core.rotations import quat_angle, vector_norm
 from .body import inside_body
 from .limbs import behind_line, find_limbs, hinge_pole
 
@@ -54,7 +54,7 @@ def still_frames(captured: np.ndarray, frame_time: float, height: float) -> np.n
     """(F,) frames inside a run of at least 0.5 s where the captured root is slower than 0.1 h/s."""
     if len(captured) < 2:
         return np.zeros(len(captured), bool)
-    speed = np.linalg.norm(np.gradient(captured[:, 0], frame_time, axis=0), axis=-1) / height
+    speed = vector_norm(np.gradient(captured[:, 0], frame_time, axis=0)) / height
     still = speed < 0.1
     shortest = int(round(0.5 / frame_time))
     out = np.zeros_like(still)
@@ -84,12 +84,12 @@ def motion_quality(motion: Motion, result) -> dict:
     out = out_all[:, result.original_index]
 
     def jerk(p):
-        return np.linalg.norm(np.diff(p, 3, axis=0), axis=-1)
+        return vector_norm(np.diff(p, 3, axis=0))
 
     jerk_ratio = float(np.percentile(jerk(out), 99) / max(np.percentile(jerk(cap), 99), 1e-12)) \
         if len(cap) > 3 else 1.0
-    cap_jump = np.linalg.norm(np.diff(cap, axis=0), axis=-1).max(axis=0, initial=0.0)
-    out_steps = np.linalg.norm(np.diff(out, axis=0), axis=-1)  # (F-1, J)
+    cap_jump = vector_norm(np.diff(cap, axis=0)).max(axis=0, initial=0.0)
+    out_steps = vector_norm(np.diff(out, axis=0))  # (F-1, J)
     out_jump = out_steps.max(axis=0, initial=0.0)
     ratios = np.where(cap_jump > 1e-3 * h, out_jump / np.maximum(cap_jump, 1e-12), 0.0)
     worst = int(np.argmax(ratios))
@@ -113,19 +113,19 @@ def motion_quality(motion: Motion, result) -> dict:
         if rest_length <= 1e-6 * h:
             continue
         chain = _path(out_skeleton, int(result.original_index[limb.base]), int(result.original_index[limb.end]))
-        length = np.linalg.norm(out_all[:, chain] - out_all[:, out_skeleton.parents[chain]], axis=-1).sum(axis=1)
+        length = vector_norm(out_all[:, chain] - out_all[:, out_skeleton.parents[chain]]).sum(axis=1)
         ratio = length / rest_length
         stretch[name] = {"peak": float(ratio.max()), "p95": float(np.percentile(ratio, 95)),
                          "above": float(np.mean(ratio > STRETCHED))}
     long_links = rest > 1e-3 * h
     long_links[0] = False
-    links = np.linalg.norm(out[:, long_links] - out[:, skeleton.parents[long_links]], axis=-1) / rest[long_links]
+    links = vector_norm(out[:, long_links] - out[:, skeleton.parents[long_links]]) / rest[long_links]
 
     still = still_frames(cap, dt, h)
     root = int(result.original_index[0])
 
     def drift(p):
-        return float((np.linalg.norm(np.gradient(p, dt, axis=0), axis=-1)[still] / h).mean()) if still.any() else None
+        return float((vector_norm(np.gradient(p, dt, axis=0))[still] / h).mean()) if still.any() else None
 
     limbs = find_limbs(skeleton)
     inside = inside_body(limbs, out, cap)
@@ -183,8 +183,8 @@ def summary(motion: Motion, result) -> dict[str, float | None]:
     cap = motion.world_positions()
     out_all = result.world_positions
     out = out_all[:, result.original_index]
-    jerk = np.linalg.norm(np.diff(out, 3, axis=0), axis=-1) if len(out) > 3 else None
-    cap_jerk = np.linalg.norm(np.diff(cap, 3, axis=0), axis=-1) if len(cap) > 3 else None
+    jerk = vector_norm(np.diff(out, 3, axis=0)) if len(out) > 3 else None
+    cap_jerk = vector_norm(np.diff(cap, 3, axis=0)) if len(cap) > 3 else None
     ratio = (float(np.percentile(jerk, 99) / max(np.percentile(cap_jerk, 99), 1e-12))
              if jerk is not None and cap_jerk is not None else 1.0)
     rest = skeleton.link_lengths()
@@ -197,7 +197,7 @@ def summary(motion: Motion, result) -> dict[str, float | None]:
         if rest_length <= 0:
             continue
         chain = _path(out_skeleton, int(result.original_index[limb.base]), int(result.original_index[limb.end]))
-        length = np.linalg.norm(out_all[:, chain] - out_all[:, out_skeleton.parents[chain]], axis=-1).sum(axis=1)
+        length = vector_norm(out_all[:, chain] - out_all[:, out_skeleton.parents[chain]]).sum(axis=1)
         longest = max(longest, float(length.max() / rest_length))
     report = result.speed_report
     return {"stretch": longest, "jerk": ratio, "limit": None if report is None else float(report.taken)}

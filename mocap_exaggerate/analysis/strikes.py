@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.rotations import vector_norm
 from ..core.timing import gaussian_average
 from .limbs import limb_length, standing_up
 
@@ -121,10 +122,10 @@ def strike_candidates(world_pos: np.ndarray, skeleton, limbs: dict, frame_time: 
         if full <= 0:
             continue
         vector = world_pos[:, limb.end] - world_pos[:, limb.base]
-        reach = gaussian_average(np.linalg.norm(vector, axis=-1) / full, 0.015 / frame_time)  # not jitter
+        reach = gaussian_average(vector_norm(vector) / full, 0.015 / frame_time)  # not jitter
         # Away from the body: from the torso's down line and from the floor's (a scoop down to the floor from a
         # bent back points away from the torso and at the floor; a leg stepping down a climbing frame too).
-        direction = vector / np.maximum(np.linalg.norm(vector, axis=-1), 1e-12)[:, None]
+        direction = vector / np.maximum(vector_norm(vector), 1e-12)[:, None]
         angle = np.degrees(np.arccos(np.clip(np.sum(direction * down, axis=-1), -1.0, 1.0)))
         floor_angle = np.degrees(np.arccos(np.clip(-direction @ up, -1.0, 1.0)))
         down_at = np.zeros(frames, bool)
@@ -219,4 +220,4 @@ def _torso_down(world_pos: np.ndarray, limbs: dict, up: np.ndarray) -> np.ndarra
     if spine is None:
         return np.broadcast_to(-up, world_pos.shape[:1] + (3,))
     down = world_pos[:, spine.base] - world_pos[:, spine.end]
-    return down / np.maximum(np.linalg.norm(down, axis=-1, keepdims=True), 1e-12)
+    return down / np.maximum(vector_norm(down, keepdims=True), 1e-12)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.motion import Motion
-from ..core.rotations import quat_angle
+from ..core.rotations import quat_angle, vector_norm
 
 __all__ = ["detect_rest_frames", "REST_POSE_MAX_ANGLE", "JUMP_FACTOR", "TELEPORT", "TELEPORT_SPEED"]
 
@@ -48,7 +48,7 @@ def detect_rest_frames(motion: Motion, world_positions: np.ndarray | None = None
         return 0
     world = motion.world_positions() if world_positions is None else world_positions
     height = motion.skeleton.height()
-    step = np.linalg.norm(world[1:, 0] - world[:-1, 0], axis=-1)
+    step = vector_norm(world[1:, 0] - world[:-1, 0])
     teleport = step > max(JUMP_FACTOR * float(np.median(step)), TELEPORT * height,
                           TELEPORT_SPEED * height * motion.frame_time)
     if not teleport[0]:
@@ -60,7 +60,7 @@ def detect_rest_frames(motion: Motion, world_positions: np.ndarray | None = None
             return 0
     pose = world - world[:, :1]
     # Median over joints: a handful of wobbling fingers should not decide it.
-    jump = np.median(np.linalg.norm(pose[1:] - pose[:-1], axis=-1), axis=1)
+    jump = np.median(vector_norm(pose[1:] - pose[:-1]), axis=1)
     typical = float(np.median(jump))
     limit = max(JUMP_FACTOR * typical, 0.01 * height)
     above = (jump > limit) | teleport

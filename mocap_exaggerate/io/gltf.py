@@ -20,7 +20,7 @@ import pygltflib as gl
 
 from ..core.errors import ConfigError
 from ..core.motion import Motion
-from ..core.rotations import quat_mul, quat_rotate, quat_unroll
+from ..core.rotations import quat_mul, quat_rotate, quat_unroll, vector_norm
 from ..rig.skinning import Skin
 
 __all__ = ["UNITS", "UPRIGHT", "unit_scale", "guessed_units_warning", "format_glb", "glb_pieces", "vertex_normals"]
@@ -292,7 +292,7 @@ def glb_pieces(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
             rotation = quat_mul(upright, rotation)
             translation = translation @ turn.T
         rotation = quat_unroll(rotation, axis=0)
-        rotation = (rotation / np.linalg.norm(rotation, axis=-1, keepdims=True)).astype(np.float32)
+        rotation = (rotation / vector_norm(rotation, keepdims=True)).astype(np.float32)
         node_scale = None
         if thickness is not None:  # joint by joint too: no (F, J) arrays beside the thickness
             parent_world = thickness[:, skeleton.parents[j]] if j > 0 else np.ones(motion.num_frames)

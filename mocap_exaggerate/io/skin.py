@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
-from ..core.rotations import quat_to_matrix
+from ..core.rotations import quat_to_matrix, vector_norm
 from ..rig.skinning import Skin, top_influences
 from .files import LIMITS, read_limited, regular_file
 
@@ -331,7 +331,7 @@ def _skinned_piece(gltf, read, number: int, column: dict[int, int], world: np.nd
     reached = np.einsum("jab,cb->jca", placed[:, :3], corners)  # (J, 8, 3)
     middle = reached.mean(axis=0)
     size = float(np.linalg.norm(middle.max(axis=0) - middle.min(axis=0)))
-    if np.max(np.linalg.norm(reached - middle, axis=-1)) <= 1e-4 * max(size, 1e-12):
+    if np.max(vector_norm(reached - middle)) <= 1e-4 * max(size, 1e-12):
         transform = placed.mean(axis=0)
         stood = world[own]
     else:

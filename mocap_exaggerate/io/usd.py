@@ -34,7 +34,7 @@ import numpy as np
 
 from ..core.errors import ConfigError
 from ..core.motion import Motion
-from ..core.rotations import quat_mul, quat_rotate, quat_unroll
+from ..core.rotations import quat_mul, quat_rotate, quat_unroll, vector_norm
 from ..rig.skinning import Skin
 from .gltf import UPRIGHT, vertex_normals
 
@@ -191,7 +191,7 @@ def _write_tracks(animation, motion: Motion, upright: np.ndarray, turn: np.ndarr
     rotation[:, 0] = quat_mul(upright, rotation[:, 0])
     translation[:, 0] = translation[:, 0] @ turn.T
     rotation = quat_unroll(rotation, axis=0)
-    rotation = (rotation / np.linalg.norm(rotation, axis=-1, keepdims=True)).astype(np.float32)
+    rotation = (rotation / vector_norm(rotation, keepdims=True)).astype(np.float32)
     node_scale = np.ones(rotation.shape[:2], dtype=np.float16)
     if thickness is not None:
         thickness = np.asarray(thickness, dtype=np.float64)

@@ -16,6 +16,7 @@ from ..config import PipelineConfig
 from ..core.errors import ConfigError
 from ..core.kinematics import cache_blocks
 from ..core.motion import Motion
+from ..core.rotations import vector_norm
 from ..io.bvh import written_positions
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin, top_influences
@@ -122,7 +123,7 @@ def output_thickness(result: PipelineResult) -> np.ndarray | None:
         positions = result.world_positions[part][:, originals]
         log_stretch = np.zeros((part.stop - part.start, count))
         log_stretch[:, child] = np.log(np.maximum(
-            np.linalg.norm(positions[:, child] - positions[:, parents[child]], axis=-1) / length[child], 1e-6))
+            vector_norm(positions[:, child] - positions[:, parents[child]]) / length[child], 1e-6))
         total = np.zeros((part.stop - part.start, count))
         np.add.at(total.T, parents[child], log_stretch[:, child].T)
         outgoing = total / np.maximum(np.bincount(parents[child], minlength=count), 1)

@@ -21,7 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..core.errors import ConfigError
-from ..core.rotations import quat_rotate
+from ..core.rotations import quat_rotate, vector_norm
 from ..core.skeleton import Skeleton
 from ..stages.subjoints import SubjointHierarchy
 
@@ -123,7 +123,7 @@ def segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nda
     length2 = np.broadcast_to(length2, along.shape)
     t = np.divide(along, length2, out=np.zeros_like(along), where=length2 > 0)
     closest = a + np.clip(t, 0.0, 1.0)[..., None] * ab
-    return np.linalg.norm(points - closest, axis=-1)
+    return vector_norm(points - closest)
 
 
 def reweight(skin: Skin, skeleton: Skeleton, hierarchy: SubjointHierarchy, *, max_influences: int = 4) -> Skin:
@@ -340,7 +340,7 @@ def _coincident(points: np.ndarray, radius: np.ndarray) -> list[list[int]]:
     spatial module is imported only then: the command line does without it).
     """
     if len(points) <= 64:
-        near = np.linalg.norm(points[:, None] - points[None], axis=-1) <= radius[:, None]
+        near = vector_norm(points[:, None] - points[None]) <= radius[:, None]
         return [list(np.flatnonzero(row)) for row in near]
     from scipy.spatial import cKDTree
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.rotations import vector_norm
 from ..core.timing import smootherstep
 
 __all__ = ["keep_bends", "keep_bends_on_rubber"]
@@ -36,21 +37,21 @@ def keep_bends(positions: np.ndarray, captured: np.ndarray, hinges, *, margin: f
     for hinge in hinges:
         base, middle, end = hinge[:3]
         line = out[:, end] - out[:, base]
-        reach = np.linalg.norm(line, axis=-1, keepdims=True)
+        reach = vector_norm(line, keepdims=True)
         along = line / np.maximum(reach, 1e-300)
         bent = captured[:, middle] - captured[:, base]
         cap_line = captured[:, end] - captured[:, base]
-        cap_line = cap_line / np.maximum(np.linalg.norm(cap_line, axis=-1, keepdims=True), 1e-300)
+        cap_line = cap_line / np.maximum(vector_norm(cap_line, keepdims=True), 1e-300)
         side = bent - np.sum(bent * cap_line, axis=-1, keepdims=True) * cap_line
-        length = np.linalg.norm(captured[:, middle] - captured[:, base], axis=-1) + \
-            np.linalg.norm(captured[:, end] - captured[:, middle], axis=-1)
+        length = vector_norm(captured[:, middle] - captured[:, base]) + \
+            vector_norm(captured[:, end] - captured[:, middle])
         if len(hinge) > 3:  # a foot: knees bend toward the toes, which says so even on a straight leg
             toes = captured[:, hinge[3]] - captured[:, end]
             toes = toes - np.sum(toes * cap_line, axis=-1, keepdims=True) * cap_line
-            toes = toes / np.maximum(np.linalg.norm(toes, axis=-1, keepdims=True), 1e-300)
+            toes = toes / np.maximum(vector_norm(toes, keepdims=True), 1e-300)
             side = side + 0.1 * length[:, None] * toes
         side = side - np.sum(side * along, axis=-1, keepdims=True) * along
-        size = np.linalg.norm(side, axis=-1)
+        size = vector_norm(side)
         side = side / np.maximum(size, 1e-300)[:, None]
         offset = out[:, middle] - out[:, base]
         offset = offset - np.sum(offset * along, axis=-1, keepdims=True) * along

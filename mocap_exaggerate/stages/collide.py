@@ -25,6 +25,7 @@ import numpy as np
 
 from ..analysis.body import body_capsules, captured_sides, limb_parts, penetrations
 from ..analysis.limbs import behind_line
+from ..core.rotations import vector_norm
 from ..core.timing import end_ramp, gaussian_average, spread_max
 
 __all__ = ["Body", "prepare_body", "keep_out", "deeper_than_captured", "unbend_hinges", "eased_push", "move_middle", "EASE"]
@@ -40,7 +41,7 @@ def eased_push(push: np.ndarray, ramp: int) -> np.ndarray:
     ``ramp``, zero ``2 ramp`` frames from any push) along the
     pushes' directions smoothed by their own size (a Gaussian reaching past the spread: where it stopped
     short the push dropped from a third of its size to nothing in a frame)."""
-    size = np.linalg.norm(push, axis=-1)
+    size = vector_norm(push)
     if not np.any(size > 0):
         return push
     radius = max(1, int(ramp))
@@ -50,7 +51,7 @@ def eased_push(push: np.ndarray, ramp: int) -> np.ndarray:
     spread = np.maximum(spread_max(size, radius) * end_ramp(len(push), min(max(2.0, radius / 4), len(push) / 4)),
                         size)
     direction = gaussian_average(push, radius / 3.0, ends="nearest", truncate=6.5)
-    length = np.linalg.norm(direction, axis=-1, keepdims=True)
+    length = vector_norm(direction, keepdims=True)
     return np.where(length > 0, spread[:, None] * direction / np.maximum(length, 1e-300), 0.0)
 
 
@@ -86,7 +87,7 @@ def prepare_body(limbs: dict, captured_pos: np.ndarray) -> Body | None:
     parts = limb_parts(limbs)
     depth = {name: np.maximum(found[0], 0.0) for name, found in penetrations(captured_pos, capsules, parts).items()}
     legs = [limbs[name].joints for name in ("left_leg", "right_leg") if name in limbs]
-    leg = max((float(np.linalg.norm(np.diff(captured_pos[0, list(joints)], axis=0), axis=-1).sum()) for joints in legs),
+    leg = max((float(vector_norm(np.diff(captured_pos[0, list(joints)], axis=0)).sum()) for joints in legs),
               default=0.0)
     hips = tuple(int(joints[0]) for joints in legs)
     root = captured_pos[:, list(hips)].mean(axis=1) if hips else captured_pos[:, 0]
@@ -111,10 +112,10 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Bod
     original = hierarchy.original
     pushed: dict[str, int] = {}
     # A push may swing a limb out, or lengthen it to at most its longest elsewhere in the clip.
-    longest = {name: float(np.linalg.norm(out[:, original[limbs[name].end]] - out[:, original[limbs[name].base]],
-                                          axis=-1).max()) for name in body.limbs}
+    longest = {name: float(vector_norm(out[:, original[limbs[name].end]] - out[:, original[limbs[name].base]]).max())
+               for name in body.limbs}
     # and a knee or elbow moved for a held end keeps each of its links to its longest in the clip.
-    longest_links = {name: [float(np.linalg.norm(out[:, original[b]] - out[:, original[a]], axis=-1).max())
+    longest_links = {name: [float(vector_norm(out[:, original[b]] - out[:, original[a]]).max())
                             for a, b in zip(limbs[name].joints, limbs[name].joints[1:])] for name in body.limbs}
     span = int(round(EASE * ramp))
     nothing = np.zeros(len(out))
@@ -125,8 +126,8 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Bod
             limb = limbs[limb_name]
             if limb.end not in effectors:
                 continue
-            upper = np.linalg.norm(out[:, original[limb.joints[1]]] - out[:, original[limb.joints[0]]], axis=-1)
-            lower = np.linalg.norm(out[:, original[limb.joints[2]]] - out[:, original[limb.joints[1]]], axis=-1)
+            upper = vector_norm(out[:, original[limb.joints[1]]] - out[:, original[limb.joints[0]]])
+            lower = vector_norm(out[:, original[limb.joints[2]]] - out[:, original[limb.joints[1]]])
             toward_root = body.root - out[:, original[list(body.hips)]].mean(axis=1) if body.hips else None
             push = np.zeros((len(out), 3))
             bend = np.zeros((len(out), 3))  # the middle joint's, for a planted end that cannot move
@@ -195,7 +196,7 @@ def _off(out_of: np.ndarray, toward_root: np.ndarray | None) -> np.ndarray:
     could not move without stretching his other, planted leg; up toward the captured crouch it could.)"""
     if toward_root is None:
         return -out_of
-    need = np.linalg.norm(out_of, axis=-1)
+    need = vector_norm(out_of)
     unit = np.divide(out_of, need[:, None], out=np.zeros_like(out_of), where=need[:, None] > 0)
     off = -np.einsum("fc,fc->f", toward_root, unit)  # how far the way back takes the body off the part
     scale = np.divide(need, off, out=np.zeros_like(need), where=off > 0)
@@ -205,7 +206,7 @@ def _off(out_of: np.ndarray, toward_root: np.ndarray | None) -> np.ndarray:
 
 def _larger(now: np.ndarray, wanted: np.ndarray) -> np.ndarray:
     """(F, 3) per frame the longer of two pushes."""
-    return np.where((np.linalg.norm(wanted, axis=-1) > np.linalg.norm(now, axis=-1))[:, None], wanted, now)
+    return np.where((vector_norm(wanted) > vector_norm(now))[:, None], wanted, now)
 
 
 def _no_longer(base: np.ndarray, end: np.ndarray, push: np.ndarray, longest: float) -> np.ndarray:
@@ -213,8 +214,8 @@ def _no_longer(base: np.ndarray, end: np.ndarray, push: np.ndarray, longest: flo
     would make the limb longer than ``longest`` (its longest in the clip) or than it is now, whichever
     is more (it swings out of the body; pushed straight out, it stretched an arm past the preset's range)."""
     goal = end + push
-    now = np.maximum(np.linalg.norm(end - base, axis=-1, keepdims=True), longest)
-    then = np.linalg.norm(goal - base, axis=-1, keepdims=True)
+    now = np.maximum(vector_norm(end - base, keepdims=True), longest)
+    then = vector_norm(goal - base, keepdims=True)
     return np.where(then > now, base + (goal - base) * np.divide(now, then, out=np.ones_like(now), where=then > 0),
                     goal)
 
@@ -232,12 +233,12 @@ def _links_no_longer(base: np.ndarray, middle: np.ndarray, end: np.ndarray, move
     goal = middle + move
     # Each link's ball round its anchor; the middle joint is held in both by alternating projections
     # (they meet, as the joint is in both now; a few rounds take it within a hair of their common part).
-    balls = [(anchor, np.maximum(np.linalg.norm(middle - anchor, axis=-1, keepdims=True), longest))
+    balls = [(anchor, np.maximum(vector_norm(middle - anchor, keepdims=True), longest))
              for anchor, longest in ((base, upper), (end, lower))]
     for _ in range(LINK_ROUNDS):
         for anchor, radius in balls:
             reach = goal - anchor
-            then = np.linalg.norm(reach, axis=-1, keepdims=True)
+            then = vector_norm(reach, keepdims=True)
             goal = np.where(then > radius, anchor + reach * np.divide(radius, then, out=np.ones_like(then),
                                                                       where=then > 0), goal)
     return goal - middle
@@ -249,7 +250,7 @@ def _back_to(root: np.ndarray, captured_root: np.ndarray, shift: np.ndarray, sla
     (Lifted off a knelt-on shin once per round, a looney boxer's hips rose 0.31 heights above the
     crouch the capture had, on thighs stretched 1.9x; held to the capture itself, an elbow folded in
     at his kneel popped 2.25x its largest captured step.)"""
-    length = np.linalg.norm(shift, axis=-1)
+    length = vector_norm(shift)
     way = np.einsum("fc,fc->f", captured_root - root, shift) / np.where(length > 0, length, 1.0) + slack
     scale = np.divide(np.clip(way, 0.0, None), length, out=np.zeros_like(length), where=length > 0)
     return shift * np.minimum(scale, 1.0)[:, None]
@@ -270,7 +271,7 @@ def _move_body(out: np.ndarray, original: np.ndarray, limbs: dict, effectors: di
         if limb is not None and limb.end in pins and limb.end in effectors:
             stay[limb.end] = out[:, original[limb.end]].copy()
             hip, knee = out[:, original[limb.joints[0]]], out[:, original[limb.joints[1]]]
-            straight = np.linalg.norm(knee - hip, axis=-1) + np.linalg.norm(stay[limb.end] - knee, axis=-1)
+            straight = vector_norm(knee - hip) + vector_norm(stay[limb.end] - knee)
             held = pins[limb.end] > 0
             share = _share_within(hip - stay[limb.end], shift, straight)
             shift = shift * np.where(held, share, 1.0)[:, None]
@@ -284,7 +285,7 @@ def _move_body(out: np.ndarray, original: np.ndarray, limbs: dict, effectors: di
 def _share_within(offset: np.ndarray, shift: np.ndarray, most: np.ndarray) -> np.ndarray:
     """(F,) the largest share ``t`` in [0, 1] of ``shift (F, 3)`` that keeps ``|offset + t shift|`` within
     ``most (F,)`` (or within ``|offset|``, where that is already more)."""
-    most = np.maximum(most, np.linalg.norm(offset, axis=-1))
+    most = np.maximum(most, vector_norm(offset))
     a = np.einsum("fc,fc->f", shift, shift)
     b = np.einsum("fc,fc->f", offset, shift)
     c = np.einsum("fc,fc->f", offset, offset) - most**2  # <= 0
@@ -314,7 +315,7 @@ def unbend_hinges(out: np.ndarray, hierarchy, limbs: dict, poles: dict[str, tupl
         # A C1 clip of the excess: 0 up to the line, easing in over 1 % of the limb's reach, then all of
         # it but half that (smooth where the joint crosses the line: easing it in time as the pushes are
         # bent joints already forward further forward, and stretched an arm past the preset's range).
-        width = 0.01 * float(np.linalg.norm(out[:, original[limb.end]] - out[:, original[limb.base]], axis=-1).max())
+        width = 0.01 * float(vector_norm(out[:, original[limb.end]] - out[:, original[limb.base]]).max())
         amount = np.where(excess < width, np.maximum(excess, 0.0) ** 2 / (2 * width), excess - width / 2)
         frames = np.flatnonzero(amount > 0)  # (only these move: the others would add zeros)
         chain = chain_of(tuple(limb.joints))
@@ -329,7 +330,7 @@ def move_middle(out: np.ndarray, chain: np.ndarray, middle: int, move: np.ndarra
     """Move a chain's middle joint by ``move (F, 3)`` (in place), its base and end staying: the sub-joints on
     its two links move by their share of the way (along the chain) from the base or the end to it."""
     points = out[:, chain]
-    steps = np.linalg.norm(np.diff(points, axis=1), axis=-1)
+    steps = vector_norm(np.diff(points, axis=1))
     at = np.concatenate([np.zeros((len(out), 1)), np.cumsum(steps, axis=1)], axis=1)
     knee = int(np.flatnonzero(chain == middle)[0])
     up = np.divide(at, at[:, knee:knee + 1], out=np.zeros_like(at), where=at[:, knee:knee + 1] > 1e-12)

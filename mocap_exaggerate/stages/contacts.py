@@ -42,7 +42,7 @@ import numpy as np
 from ..analysis.branches import incoming_joint, minor_branches, rider_joints, rubber_groups
 from ..analysis.limbs import Limb, behind_line, hinge_pole, offset_from_line
 from ..core.errors import ConfigError, check_choice, check_flag, check_number
-from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp
+from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp, vector_norm
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
 from ..core.timing import check_duration, gaussian_average, parse_duration, parse_frame, smootherstep, spread_max
@@ -350,7 +350,7 @@ def _speed(points: np.ndarray, frame_time: float) -> np.ndarray:
 
     smooth = gaussian_average(points, max(0.02 / frame_time, 0.5))
     velocity = np.gradient(smooth, frame_time, axis=0) if len(points) > 1 else np.zeros_like(points)
-    return np.linalg.norm(velocity, axis=-1)
+    return vector_norm(velocity)
 
 
 def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground, frame_time: float,
@@ -482,9 +482,9 @@ def ease_lengths(runs: np.ndarray, paths: np.ndarray, shift: np.ndarray, limits:
     for row, (first, last) in enumerate(runs):  # a loop over contacts, not frames
         for side, (start, direction) in enumerate(((first, -1), (last, 1))):
             reach = np.clip(start + direction * distance, 0, frames - 1)
-            own = np.linalg.norm(np.diff(paths[reach], axis=0), axis=-1)  # (d-1, k)
+            own = vector_norm(np.diff(paths[reach], axis=0))  # (d-1, k)
             eased = paths[reach][None] + weights[:, :, None, None] * shift[reach][None, :, None, :]
-            steps = np.linalg.norm(np.diff(eased, axis=1), axis=-1)  # (R, d-1, k)
+            steps = vector_norm(np.diff(eased, axis=1))  # (R, d-1, k)
             worst = (steps / np.maximum(own, limits)[None]).max(axis=(1, 2))
             fits = np.flatnonzero(worst <= 1.0 + 1e-9)
             out[row, side] = lengths[fits[0]] if len(fits) else lengths[int(np.argmin(worst))]
@@ -600,23 +600,23 @@ def two_bone_ik(base: np.ndarray, middle: np.ndarray, end: np.ndarray, target: n
     knee pop of ``--no-subjoints``. Past reach (or closer than the bones
     can fold) both bones scale together, as rubber would.
     """
-    upper = np.linalg.norm(middle - base, axis=-1)
-    lower = np.linalg.norm(end - middle, axis=-1)
+    upper = vector_norm(middle - base)
+    lower = vector_norm(end - middle)
     own = offset_from_line(base, middle, end)
     if pole is not None:  # the pole decides the side where the chain's own bend is under 5-20 % of its upper bone
-        clear = smootherstep((np.linalg.norm(own, axis=-1) / np.maximum(upper, 1e-12) - 0.05) / 0.15)
+        clear = smootherstep((vector_norm(own) / np.maximum(upper, 1e-12) - 0.05) / 0.15)
         own = own + (1.0 - clear)[:, None] * 0.2 * upper[:, None] * pole
     now = _solve_middle(base, upper, lower, end, own, soft)
     moved = _solve_middle(base, upper, lower, target, own, soft)
     # Folded nearly shut (a looney squat's thigh onto its shin) keeping both lengths swings the middle
     # joint by the bones' length over the end's distance from the base times the end's move (12x at
     # 4 % of the reach): there the middle joint takes its share of the end's move, as rubber.
-    reach = np.minimum(np.linalg.norm(end - base, axis=-1), np.linalg.norm(target - base, axis=-1))
+    reach = np.minimum(vector_norm(end - base), vector_norm(target - base))
     folded = smootherstep((FOLDED[1] - reach / np.maximum(upper + lower, 1e-12)) / (FOLDED[1] - FOLDED[0]))
     share = upper / np.maximum(upper + lower, 1e-12)
     # The chain's own departure from the solve (a knee nearly straight sits off the soft solve's bend)
     # is kept where the target is its end and let go as the target moves away.
-    keep = np.exp(-np.linalg.norm(target - end, axis=-1) / np.maximum(soft * (upper + lower), 1e-12))
+    keep = np.exp(-vector_norm(target - end) / np.maximum(soft * (upper + lower), 1e-12))
     solved = moved + keep[:, None] * (middle - now)
     return (1.0 - folded)[:, None] * solved + folded[:, None] * (middle + share[:, None] * (target - end))
 
@@ -624,16 +624,16 @@ def two_bone_ik(base: np.ndarray, middle: np.ndarray, end: np.ndarray, target: n
 def _solve_middle(base, upper, lower, target, side, soft) -> np.ndarray:
     """Where a two-bone chain's middle joint goes for its end to reach ``target``, bending toward ``side``."""
     reach = target - base
-    distance = np.linalg.norm(reach, axis=-1)
+    distance = vector_norm(reach)
     tiny = 1e-12
     direction = reach / np.maximum(distance, tiny)[:, None]
     # The side projected across the new line (not turned onto it: a turn is undefined where the line
     # swings past a half turn, a projection is not).
     side = side - np.sum(side * direction, axis=-1, keepdims=True) * direction
-    side_len = np.linalg.norm(side, axis=-1)
+    side_len = vector_norm(side)
     fallback = np.cross(direction, np.eye(3)[np.argmin(np.abs(direction), axis=-1)])
     side = np.where((side_len > tiny)[:, None], side, fallback)
-    side /= np.maximum(np.linalg.norm(side, axis=-1), tiny)[:, None]
+    side /= np.maximum(vector_norm(side), tiny)[:, None]
     longest = upper + lower
     shortest = np.abs(upper - lower)
     zone = soft * longest
@@ -750,12 +750,12 @@ def constrain(
             else:
                 target = anchored_targets(captured_pos[:, joint], out[:, original[joint]], runs, ground)
             # A foot landing far from where the exaggeration put it eases in longer, not faster.
-            gap = np.linalg.norm(target - out[:, original[joint]], axis=-1)
-            speed = float(np.linalg.norm(np.diff(captured_pos[:, joint], axis=0), axis=-1).max(initial=0.0))
+            gap = vector_norm(target - out[:, original[joint]])
+            speed = float(vector_norm(np.diff(captured_pos[:, joint], axis=0)).max(initial=0.0))
             lengths = run_ramps(runs, gap, speed, ramp, 0.5 / frame_time)
             if max_speed > 0:  # and long enough that the foot and its toes keep to the speed limit
                 moving = [joint, *(riders or {}).get(joint, [])]
-                limits = max_speed * np.linalg.norm(np.diff(captured_pos[:, moving], axis=0), axis=-1).max(axis=0)
+                limits = max_speed * vector_norm(np.diff(captured_pos[:, moving], axis=0)).max(axis=0)
                 lengths = np.maximum(lengths, ease_lengths(runs, out[:, original[moving]], target - out[:, original[joint]],
                                                            limits, ramp, 0.5 / frame_time))
             weight = contact_weights(runs, frames, lengths)

@@ -44,6 +44,7 @@ import numpy as np
 from ..analysis.limbs import limb_hinges
 from ..core.errors import ConfigError, check_flag, check_number
 from ..core.kinematics import cache_blocks
+from ..core.rotations import vector_norm
 from ..core.settings import Flag, setting
 from ..core.timing import check_duration, parse_duration, smootherstep, spread_max
 from .bends import keep_bends
@@ -134,7 +135,7 @@ def accent_stretch(captured: np.ndarray, frame_time: float, height: float, *, ma
     if len(captured) < 2:
         return np.full(captured.shape[:2], float(max_stretch))
     relative = captured - captured[:, :1]
-    speed = np.linalg.norm(np.gradient(relative, axis=0), axis=-1) / (frame_time * height)
+    speed = vector_norm(np.gradient(relative, axis=0)) / (frame_time * height)
     low = accent_speed / 3.0
     accent = spread_max(smootherstep((speed - low) / (accent_speed - low)), radius)
     return 1.0 + (max_stretch - 1.0) * np.clip(accent, 0.0, 1.0)
@@ -165,7 +166,7 @@ def _limits(max_stretch, rest_lengths: np.ndarray) -> np.ndarray:
 
 def _excess(world_pos, parents, rest_lengths, max_stretch):
     vec = world_pos[:, 1:] - world_pos[:, parents[1:]]
-    length = np.linalg.norm(vec, axis=-1)
+    length = vector_norm(vec)
     x = np.maximum(0.0, length - _limits(max_stretch, rest_lengths))
     return x, vec, length
 
@@ -348,6 +349,6 @@ def max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.nda
     links, ends = np.flatnonzero(long_links), parents[long_links]
     largest = 0.0
     for part in cache_blocks(len(positions), 8 * len(links)):  # no (F, links, 3) temporaries on a long clip
-        current = np.linalg.norm(positions[part][:, links] - positions[part][:, ends], axis=-1)
+        current = vector_norm(positions[part][:, links] - positions[part][:, ends])
         largest = max(largest, float((current / lengths[long_links]).max()))
     return largest

@@ -47,6 +47,7 @@ import numpy as np
 from ..analysis.branches import rider_joints
 from ..analysis.limbs import LIMB_NAMES, find_limbs, limb_joints, torso_joints
 from ..core.errors import ConfigError, check_flag, check_number
+from ..core.rotations import vector_norm
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
 from ..core.timing import end_ramp, gaussian_average, parse_duration, smootherstep, spread_max, step_gain
@@ -222,14 +223,14 @@ def extrapolate(
         deviation[:, joints] = deviation[:, :1] + share * (deviation[:, joints] - deviation[:, :1])
     deviation *= gain[:, None]
     if still > 0 and len(moved) > 1:
-        speed = np.linalg.norm(np.gradient(smoothed, axis=0), axis=-1)  # (F, J) per frame
+        speed = vector_norm(np.gradient(smoothed, axis=0))  # (F, J) per frame
         moving = smootherstep((speed - still) / (2.0 * still))
         deviation *= spread_max(moving, max(int(round(sigma)), 1))[..., None]
     if ramp > 0:
         deviation *= end_ramp(len(moved), ramp)[:, None, None]
-    asked = np.linalg.norm(deviation, axis=-1) if return_limited else None
+    asked = vector_norm(deviation) if return_limited else None
     if max_speed > 0 and len(moved) > 2:
-        top = np.linalg.norm(np.diff(moved, axis=0), axis=-1).max(axis=0)
+        top = vector_norm(np.diff(moved, axis=0)).max(axis=0)
         for joint, below in (riders or {}).items():
             moving = top[below][top[below] > 0]
             if len(moving):
@@ -238,7 +239,7 @@ def extrapolate(
         deviation = _limit_speed(deviation, budget, max(int(round(sigma / 3.0)), 2))
     out = np.moveaxis(moved + deviation, 0, axis)
     if return_limited:
-        return out, Limited(asked, np.linalg.norm(deviation, axis=-1))
+        return out, Limited(asked, vector_norm(deviation))
     return out
 
 
@@ -271,7 +272,7 @@ def _limit_speed(deviation: np.ndarray, budget: np.ndarray, radius: int) -> np.n
     """
     out = deviation
     for _ in range(_SPEED_PASSES):
-        step = np.linalg.norm(np.diff(out, axis=0), axis=-1)  # (F-1, J)
+        step = vector_norm(np.diff(out, axis=0))  # (F-1, J)
         over = step > budget * (1.0 - 1e-9)
         if not over.any():
             return out
@@ -279,7 +280,7 @@ def _limit_speed(deviation: np.ndarray, budget: np.ndarray, radius: int) -> np.n
         out = out * step_gain(share, radius)[..., None]
     # Still over after the passes (a gain changing fast where the deviation is large: a sigma of
     # a few frames): scale those joints' whole deviation down, which scales every step alike.
-    step = np.linalg.norm(np.diff(out, axis=0), axis=-1).max(axis=0)
+    step = vector_norm(np.diff(out, axis=0)).max(axis=0)
     scale = np.where(step > budget, budget / np.maximum(step, 1e-300), 1.0)
     return out * scale[:, None]
 

@@ -31,7 +31,17 @@ import numpy as np
 from ..analysis.branches import effective_lengths, first_above_at_distance, first_below_at_distance, riders
 from ..core.kinematics import cache_blocks, local_from_world
 from ..core.motion import Motion
-from ..core.rotations import quat_between, quat_from_matrix, quat_inv, quat_mul, quat_normalize, quat_pow, quat_rotate, quat_slerp
+from ..core.rotations import (
+    quat_between,
+    quat_from_matrix,
+    quat_inv,
+    quat_mul,
+    quat_normalize,
+    quat_pow,
+    quat_rotate,
+    quat_slerp,
+    vector_norm,
+)
 from ..core.timing import gaussian_average, smootherstep, step_gain
 from .state import Output
 from .subjoints import SubjointHierarchy, link_starts
@@ -70,7 +80,7 @@ def _fit_turn(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """
     middle = u[len(u) // 2]
     centred = middle - middle.mean(axis=0)
-    if np.linalg.norm(centred, axis=-1).max() > 0.1 * np.linalg.norm(middle, axis=-1).max():
+    if vector_norm(centred).max() > 0.1 * vector_norm(middle).max():
         u = u - u.mean(axis=1, keepdims=True)  # a shift of all the children together is not a turn
         v = v - v.mean(axis=1, keepdims=True)
     cross_cov = np.einsum("fni,fnj->fij", v, u)
@@ -189,14 +199,14 @@ def _calm_riders(world, new_pos, source_rot, source_pos, skeleton, rigid, max_sp
     budget up, the turn goes as far as back to the captured orientation.
     """
     for p, below in riders(skeleton, rigid).items():
-        budget = max_speed * np.linalg.norm(np.diff(source_pos[:, below], axis=0), axis=-1).max(axis=0)
+        budget = max_speed * vector_norm(np.diff(source_pos[:, below], axis=0)).max(axis=0)
         turn = quat_mul(world[:, p], quat_inv(source_rot[:, p]))
         turn = turn * np.where(turn[:, 3:] < 0, -1.0, 1.0)  # the shorter way: D^0 = 1, D^1 = D
         offsets = source_pos[:, below] - source_pos[:, p : p + 1]
         gain = np.ones(len(turn))
         for _ in range(_RIDER_PASSES):
             placed = quat_rotate(quat_pow(turn, gain)[:, None], offsets) + new_pos[:, p : p + 1]
-            step = np.linalg.norm(np.diff(placed, axis=0), axis=-1)  # (F-1, riders)
+            step = vector_norm(np.diff(placed, axis=0))  # (F-1, riders)
             share = np.min(np.where(step > budget, budget / np.maximum(step, 1e-300), 1.0), axis=1) * 0.98
             if share.min() >= 0.98:
                 break
@@ -241,7 +251,7 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
     counts = np.bincount(hierarchy.link_child[~hierarchy.is_original], minlength=len(hierarchy.original))
     cuts = counts[hierarchy.link_child[starts]]  # sub-links on each link: s0 ... s(n-1), then its end joint
     direction = sub.offsets[starts + 1]  # every sub-link of a link rests along the same direction
-    direction = direction / np.maximum(np.linalg.norm(direction, axis=-1, keepdims=True), 1e-300)
+    direction = direction / np.maximum(vector_norm(direction, keepdims=True), 1e-300)
     head = hierarchy.original[hierarchy.link_parent[starts]]
     end = hierarchy.original[hierarchy.link_child[starts]]
     # The twist left at the far end, against the end's frame: the next link's start where the chain
@@ -262,12 +272,12 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
             out[part, joint] = frame[:, on]
         # Their turn relative to the carried frame, split into a swing and a twist about the last sub-link.
         last = positions[part, end] - positions[part, starts + cuts - 1]
-        axis = last / np.maximum(np.linalg.norm(last, axis=-1, keepdims=True), 1e-300)
+        axis = last / np.maximum(vector_norm(last, keepdims=True), 1e-300)
         gap = quat_mul(out[part, ends], quat_inv(frame))
         sign = np.where(gap[..., 3] < 0.0, -1.0, 1.0)  # q and -q are one turn: take the one within half a turn
         twisted = 2.0 * np.arctan2(sign * np.sum(gap[..., :3] * axis, axis=-1), np.abs(gap[..., 3]))
         pointing = quat_rotate(gap, axis)
-        fold = np.sum(pointing * axis, axis=-1) / np.maximum(np.linalg.norm(pointing, axis=-1), 1e-300)
+        fold = np.sum(pointing * axis, axis=-1) / np.maximum(vector_norm(pointing), 1e-300)
         angle[part] = twisted * (smootherstep((fold - _FOLDED) / (_UNFOLDED - _FOLDED))
                                  * smootherstep((np.pi - np.abs(twisted)) / (np.pi - _TWIST_FADE)))
     angle = gaussian_average(angle, 1.0, ends="nearest")  # where the fades pass quickly, over a few frames

@@ -27,6 +27,7 @@ import numpy as np
 from ..analysis.limbs import limb_hinges, limb_joints
 from ..core.errors import ConfigError, check_flag, check_number
 from ..core.kinematics import frame_blocks
+from ..core.rotations import vector_norm
 from ..core.settings import Flag, setting
 from ..core.timing import smootherstep, soft_limit
 from .bends import keep_bends_on_rubber
@@ -393,7 +394,7 @@ def _limit_block(positions: np.ndarray, before: np.ndarray, parents: np.ndarray,
     """`limit_stretch` on a block of frames, in place."""
     vectors = positions[:, 1:] - positions[:, parents[1:]]
     length = np.sqrt(np.einsum("fjc,fjc->fj", vectors, vectors))
-    had = np.linalg.norm(before[:, 1:][:, limited] - before[:, parents[1:][limited]], axis=-1)
+    had = vector_norm(before[:, 1:][:, limited] - before[:, parents[1:][limited]])
     knee = np.maximum(had, rest + LIMIT_KNEE * way)
     top = np.maximum(most * rest, knee + LIMIT_ROOM * way)
     new_length = soft_limit(length[:, limited], knee, top)

@@ -29,7 +29,7 @@ import numpy as np
 from ..analysis.limbs import limb_length
 from ..analysis.strikes import CANDIDATE_REACH, Candidate, strike_candidates
 from ..core.errors import ConfigError, check_number
-from ..core.rotations import quat_between, quat_rotate
+from ..core.rotations import quat_between, quat_rotate, vector_norm
 from ..core.settings import Flag, setting
 from ..core.timing import parse_duration, parse_frame
 from .state import StretchKey
@@ -445,9 +445,9 @@ def apply_stretches(
             # from it to the length asked, the body with it (the least move that keeps both).
             weight = held[0][span][:, None]
             stand = held[1][span] if held[1] is not None else world_pos[span, end]
-            length = np.linalg.norm(target[span] - world_pos[span, base], axis=-1, keepdims=True)
+            length = vector_norm(target[span] - world_pos[span, base], keepdims=True)
             away = world_pos[span, base] - stand
-            away /= np.maximum(np.linalg.norm(away, axis=-1, keepdims=True), 1e-12)
+            away /= np.maximum(vector_norm(away, keepdims=True), 1e-12)
             shift = weight * (stand + length * away - world_pos[span, base])
             world_pos[span, _body_of(skeleton, base)] += shift[:, None]
             target[span] = (1.0 - weight) * target[span] + weight * stand
@@ -460,8 +460,8 @@ def apply_stretches(
             "original": before[span, end].round(6).tolist(), "exaggerated": world_pos[span, end].round(6).tolist(),
         })
 
-    lengths_before = np.linalg.norm(before[:, 1:] - before[:, skeleton.parents[1:]], axis=-1)
-    lengths_after = np.linalg.norm(world_pos[:, 1:] - world_pos[:, skeleton.parents[1:]], axis=-1)
+    lengths_before = vector_norm(before[:, 1:] - before[:, skeleton.parents[1:]])
+    lengths_after = vector_norm(world_pos[:, 1:] - world_pos[:, skeleton.parents[1:]])
     factors = np.ones((frames_total, skeleton.num_joints))
     factors[:, 1:] = np.divide(lengths_after, lengths_before, out=np.ones_like(lengths_after),
                                where=lengths_before > 1e-12)
@@ -489,8 +489,8 @@ def _follow(world_pos: np.ndarray, skeleton, limb, target: np.ndarray, span: sli
     origin = pos[:, base]
     old = pos[:, end] - origin
     new = target[span] - origin
-    old_len = np.linalg.norm(old, axis=-1)
-    new_len = np.linalg.norm(new, axis=-1)
+    old_len = vector_norm(old)
+    new_len = vector_norm(new)
     turn = quat_between(old, new)
     stretch = np.divide(new_len, old_len, out=np.ones_like(old_len), where=old_len > 1e-12)
     axis = np.divide(old, old_len[:, None], out=np.zeros_like(old), where=old_len[:, None] > 1e-12)

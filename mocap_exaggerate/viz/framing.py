@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.errors import ConfigError, check_number
 from ..core.motion import Motion
+from ..core.rotations import vector_norm
 from ..core.skeleton import Skeleton
 from ..pipeline import PipelineResult
 
@@ -44,7 +45,7 @@ def telling_frames(motion: Motion, result: PipelineResult, count: int = 4, *,
     captured, first = lined_up(motion, result, world)
     exaggerated = result.world_positions[:, result.original_index]
     moved = (exaggerated - exaggerated[:, :1]) - (captured - captured[:, :1])
-    away = np.linalg.norm(moved, axis=-1).max(axis=1)[first:]
+    away = vector_norm(moved).max(axis=1)[first:]
     apart = max(len(away) // 8, 1)
     picks: list[int] = []
     for frame in np.argsort(-away, kind="stable"):
@@ -60,7 +61,7 @@ def telling_window(motion: Motion, result: PipelineResult, joint: int, seconds: 
     """Output frames ``[start, end)`` of about ``seconds`` around the moment ``joint`` is moved
     furthest from its captured path: the part of a long clip a path picture can show."""
     captured, first = lined_up(motion, result, world)
-    away = np.linalg.norm(result.world_positions[:, result.original_index[joint]] - captured[:, joint], axis=-1)
+    away = vector_norm(result.world_positions[:, result.original_index[joint]] - captured[:, joint])
     total = len(away)
     width = max(int(round(seconds / motion.frame_time)), 2)
     if total - first <= width:
@@ -86,7 +87,7 @@ def fastest_end(motion: Motion, first: int | None = None, *, world: np.ndarray |
     ends = sorted({limb.end for limb in find_limbs(motion.skeleton).values()}) or list(range(motion.skeleton.num_joints))
     if len(world) < 2:
         return ends[0]
-    speed = np.linalg.norm(np.diff(world[:, ends], axis=0), axis=-1)
+    speed = vector_norm(np.diff(world[:, ends], axis=0))
     return ends[int(np.argmax(np.percentile(speed, 99, axis=0)))]
 
 

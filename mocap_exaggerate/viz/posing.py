@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.motion import Motion
+from ..core.rotations import vector_norm
 from ..jobs.outputs import base_skin, output_skin, output_thickness
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin, pose_skin
@@ -168,7 +169,7 @@ def shaded_triangles(vertices: np.ndarray, faces: np.ndarray, axes: tuple[int, i
     kept = triangles[frame, index]  # (N, 3, 3)
     light = np.zeros(3, dtype=np.float32)
     light[depth], light[up] = 0.8, 0.6
-    length = np.linalg.norm(normal, axis=-1)
+    length = vector_norm(normal)
     shade = 0.35 + 0.65 * np.clip(np.divide(normal @ light, length, out=np.zeros_like(length), where=length > 0),
                                   0.0, 1.0)
     # Far first: one sort of all frames' triangles by depth keeps each frame's in order (frames never share
