@@ -132,24 +132,28 @@ def test_toes_keep_to_the_speed_limit_their_foot_keeps():
 
 def test_local_rotations_written_over_the_world_ones_are_the_same_bits():
     """The orient stage turns its world rotations into local ones in place (a long clip does not
-    hold both); block by block, each read whole before it is written, they are the copy's bits,
-    and the result's world rotations (its FK, made when asked) come back to within rounding."""
-    from mocap_exaggerate.core.kinematics import local_from_world
+    hold both): block by block, each read whole before it is written, they are the copy's bits; and
+    forward kinematics of the result gives the world rotations and positions back within rounding
+    (what the result's world rotations now are)."""
+    from mocap_exaggerate.core.kinematics import cache_blocks, forward_kinematics, local_from_world
 
     motion = read_bvh(SAMPLE_DIR / "cmu_09_01_run_daz.bvh")[0]
     rot, pos = motion.world_rotations(), motion.world_positions()
+    rot, pos = np.concatenate([rot] * 8), np.concatenate([pos] * 8)  # 1,192 frames: several blocks
     parents = motion.skeleton.parents
+    assert len(cache_blocks(len(rot), len(parents) - 1)) >= 3
     copied_rot, copied_pos = local_from_world(parents, rot, pos)
     buffer = rot.copy()
     local_rot, local_pos = local_from_world(parents, buffer, pos, overwrite_rotations=True)
     assert local_rot is buffer
-    assert np.array_equal(local_rot, copied_rot) and np.array_equal(local_pos, copied_pos)
-    assert not np.array_equal(local_rot, rot)  # written over: not the world rotations any more
+    assert local_rot.tobytes() == copied_rot.tobytes() and local_pos.tobytes() == copied_pos.tobytes()
     with pytest.raises(TypeError):
         local_from_world(parents, rot.astype(np.float32), pos, overwrite_rotations=True)
+    again_rot, again_pos = forward_kinematics(parents, local_rot, local_pos)
+    assert np.max(quat_angle(again_rot, rot)) < 1e-12
+    assert np.max(np.abs(again_pos - pos)) < 1e-9 * motion.skeleton.height()
 
     result = run(motion, load_preset("cartoon"))
-    assert np.array_equal(result.world_rotations, result.motion.world_rotations())
     placed = result.world_positions
     parents_out = result.motion.skeleton.parents[1:]
     turned = quat_rotate(result.world_rotations[:, parents_out], result.motion.local_positions[:, 1:])

@@ -71,6 +71,7 @@ def _spinning_through_locks(frames: int, joints: int, order: str, seed: int) -> 
     euler = np.cumsum(rng.normal(scale=40.0, size=(frames, joints, 3)), axis=0)
     locked = rng.random((frames, joints)) < 0.3
     locked[: frames // 3, 0] = True  # joint 0 starts locked for a third of the clip
+    locked[:, -1] = True  # the last joint is locked throughout (its third angle is 0)
     euler[..., 1] = np.where(locked, 90.0 * rng.choice([-1.0, 1.0], size=(frames, joints)), euler[..., 1])
     return quat_from_euler(euler, order)
 
@@ -91,6 +92,12 @@ def test_euler_blocks_are_the_whole_clips_angles_bit_for_bit(order, block):
     reference = quat_to_euler(q, order) + 360.0
     with_reference = np.concatenate(list(euler_blocks(q, order, reference, block=block)))
     assert np.array_equal(with_reference, quat_to_euler(q, order, reference=reference))
+    # As the BVH writer calls it: some joints, and every joint's reference (each block takes its columns').
+    both = np.concatenate(list(euler_blocks(q, order, reference, block=block, columns=[3, 0])))
+    assert np.array_equal(both, quat_to_euler(q[:, [3, 0]], order, reference=reference[:, [3, 0]]))
+    # A joint locked throughout: its third angle is 0, its first carries the whole turn.
+    assert np.all(whole[:, -1, 2] == 0.0)
+    assert np.max(quat_angle(quat_from_euler(whole, order), q)) < 1e-6
 
 
 def test_unroll_makes_neighbours_same_hemisphere():

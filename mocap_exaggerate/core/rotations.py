@@ -385,9 +385,14 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
     The same numbers as on the whole clip at once, bit for bit: what one frame's
     choice depends on is carried from block to block (the previous frame's
     solution, the parity of the flips so far, the whole turns added so far, the
-    last angle that was not at gimbal lock). A writer converts a long clip with
-    only a block of angles in memory.
+    last angle that was not at gimbal lock; for a joint locked from the first
+    frame, the first angle after that is not, looked for once). A writer converts
+    a long clip with only a block of angles in memory. (Against the whole-clip
+    conversion before blocks, an angle of exactly zero may keep a minus sign the
+    old unwrapping took off; no writer shows it.)
 
+    reference : broadcastable to ``q``'s own angles ``(F, ..., 3)``, every joint's even
+        with ``columns`` (each block takes the columns' share)
     columns : for ``q (F, J, 4)``, the joints to convert (default all), taken from
         each block as it comes (no copy of the clip's rotations)
     """
@@ -406,13 +411,14 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
         lead = (frames, len(pick))
         if np.array_equal(pick, np.arange(flat.shape[1])):
             pick = slice(None)  # every joint in order: each block a view, not a copy
-    columns = int(np.prod(lead[1:], dtype=np.int64))
+    width = int(np.prod(lead[1:], dtype=np.int64))  # the M of the (n, M, 3) blocks
     source_columns = np.arange(flat.shape[1])[pick]
     previous = None  # the previous frame's first solution, (M, 3)
-    parity = np.zeros(columns, dtype=np.int64)  # flips so far
-    turns_so_far = np.zeros((columns, 3))  # whole turns taken away so far
+    parity = np.zeros(width, dtype=np.int64)  # flips so far
+    turns_so_far = np.zeros((width, 3))  # whole turns taken away so far
     last_chosen = None  # the previous frame's pick before whole turns, (M, 3)
-    last_third = np.full(columns, np.nan)  # the third angle of the last frame not at gimbal lock
+    last_third = np.full(width, np.nan)  # the third angle of the last frame not at gimbal lock
+    ahead = _LookAhead(flat, order, source_columns, block)
     for start in range(0, frames, block):
         part = slice(start, min(start + block, frames))
         qs = flat[part][:, pick]
@@ -427,10 +433,8 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
             if reference is not None:
                 third = reference[part][:, pick, 2]
             else:
-                def after(wanted: np.ndarray, stop: int = part.stop) -> np.ndarray:
-                    return _next_unlocked_third(flat, order, stop, source_columns[wanted], block)
-
-                third = _fill_from_unlocked(first[..., 2], locked, last_third, after)
+                third = _fill_from_unlocked(first[..., 2], locked, last_third,
+                                            lambda wanted, stop=part.stop: ahead.third(wanted, stop))
             first = np.where(locked[..., None], _solve_first_angle(qs, first[..., 1], third, order), first)
         if reference is None:
             unlocked = np.flatnonzero(~locked.all(axis=0))
@@ -506,21 +510,32 @@ def _fill_from_unlocked(values: np.ndarray, locked: np.ndarray, before: np.ndarr
     return filled
 
 
-def _next_unlocked_third(q: np.ndarray, order: str, start: int, columns: np.ndarray, block: int) -> np.ndarray:
-    """The third Euler angle of each column's first frame from ``start`` on that is not at gimbal lock (0 where none)."""
-    found = np.zeros(len(columns))
-    waiting = np.ones(len(columns), dtype=bool)
-    for begin in range(start, len(q), block):
-        if not waiting.any():
-            break
-        angles = _euler_from_quat(q[begin : begin + block, columns[waiting]], order)
-        free = np.abs(np.abs(angles[..., 1]) - 90.0) >= 1e-6
-        hit = free.any(axis=0)
-        at = np.argmax(free, axis=0)
-        got = np.flatnonzero(waiting)
-        found[got[hit]] = angles[at[hit], np.flatnonzero(hit), 2]
-        waiting[got[hit]] = False
-    return found
+class _LookAhead:
+    """For `euler_blocks`: the third Euler angle of each column's first frame from a given one on that
+    is not at gimbal lock (0 where none). Each column's is looked for once and kept until the blocks
+    pass it: a joint locked for a whole clip costs one pass over it, not one per block."""
+
+    def __init__(self, q: np.ndarray, order: str, columns: np.ndarray, block: int) -> None:
+        self.q, self.order, self.columns, self.block = q, order, columns, block
+        self.at = np.full(len(columns), -1, dtype=np.int64)  # where the found frame is (len(q): none)
+        self.value = np.zeros(len(columns))
+
+    def third(self, wanted: np.ndarray, start: int) -> np.ndarray:
+        stale = wanted[self.at[wanted] < start]
+        waiting = np.ones(len(stale), dtype=bool)
+        self.at[stale], self.value[stale] = len(self.q), 0.0
+        for begin in range(start, len(self.q), self.block):
+            if not waiting.any():
+                break
+            angles = _euler_from_quat(self.q[begin : begin + self.block, self.columns[stale[waiting]]], self.order)
+            free = np.abs(np.abs(angles[..., 1]) - 90.0) >= 1e-6
+            hit = free.any(axis=0)
+            row = np.argmax(free, axis=0)
+            got = stale[waiting][hit]
+            self.at[got] = begin + row[hit]
+            self.value[got] = angles[row[hit], np.flatnonzero(hit), 2]
+            waiting[np.flatnonzero(waiting)[hit]] = False
+        return self.value[wanted]
 
 
 def _solve_first_angle(q: np.ndarray, second: np.ndarray, third: np.ndarray, order: str) -> np.ndarray:

@@ -347,8 +347,6 @@ def max_link_stretch(positions: np.ndarray, parents: np.ndarray, lengths: np.nda
     if not long_links.any():
         return 1.0
     links, ends = np.flatnonzero(long_links), parents[long_links]
-    largest = 0.0
-    for part in cache_blocks(len(positions), 8 * len(links)):  # no (F, links, 3) temporaries on a long clip
-        current = vector_norm(positions[part][:, links] - positions[part][:, ends])
-        largest = max(largest, float((current / lengths[long_links]).max()))
-    return largest
+    largest = [(vector_norm(positions[part][:, links] - positions[part][:, ends]) / lengths[long_links]).max()
+               for part in cache_blocks(len(positions), 8 * len(links))]  # no (F, links, 3) temporaries
+    return float(np.max(largest))  # (NaN stays NaN; no frames is an error, as before)
