@@ -302,6 +302,50 @@ def test_ctrl_c_while_the_workers_start_is_heard(tmp_path):
         assert len(list(out.glob("*.json"))) < 12, delay
 
 
+@pytest.mark.process
+def test_ctrl_c_on_a_local_dask_cluster_ends_the_batch_and_its_workers_quietly(tmp_path):
+    """The workers of ``--scheduler local`` heard the terminal's Ctrl-C too, and each printed a
+    KeyboardInterrupt traceback. Now only the batch hears it: exit 130, no traceback, no half-written
+    file, and no process of the batch's left."""
+    pytest.importorskip("distributed", reason="Dask distributed is not installed")
+    folder = copies(tmp_path, 12)
+    for moment in ("starting", "converting"):
+        out = tmp_path / f"out_{moment}"
+        process = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", folder, out, "-j", "2",
+                                    "--scheduler", "local"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                   text=True, start_new_session=True, preexec_fn=_hears_ctrl_c)
+        if moment == "starting":
+            time.sleep(0.5)
+        else:
+            deadline = time.monotonic() + 120
+            while not list(out.glob("*.json")) and time.monotonic() < deadline and process.poll() is None:
+                time.sleep(0.02)
+        os.killpg(process.pid, signal.SIGINT)
+        _, stderr = process.communicate(timeout=120)
+        assert process.returncode in (130, -signal.SIGINT), (moment, process.returncode, stderr)
+        assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, (moment, stderr)
+        written = files_under(out) if out.exists() else []
+        assert not any(name.endswith(".tmp") for name in written), (moment, written)
+        deadline = time.monotonic() + 10
+        while _group(process.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _group(process.pid), moment
+
+
+def _group(leader: int) -> list[str]:
+    """The live processes of a process group (zombies aside)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit() and os.getpgid(int(entry.name)) == leader:
+                state = (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
+                if state != "Z":
+                    found.append(entry.name)
+        except (OSError, ValueError):
+            continue
+    return found
+
+
 # ---------------------------------------------------------------------------- the library
 
 

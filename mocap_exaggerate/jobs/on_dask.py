@@ -20,7 +20,7 @@ from ..core.errors import ConfigError
 from .batch_types import BatchOptions, Clip, FileResult
 from .discovery import largest_first, source_size
 from .memory import malloc_thresholds
-from .pool import one_thread_per_worker
+from .pool import _ctrl_c_held, one_thread_per_worker
 from .task import clear_temporaries, convert_file
 
 __all__ = ["check_scheduler", "connect_dask", "run_on_dask", "convert_on_worker", "malloc_thresholds", "SchedulerLost",
@@ -78,11 +78,19 @@ def connect_dask(scheduler: str, jobs: int = 1):
             # Dask's nanny starts each worker with MALLOC_TRIM_THRESHOLD_=65536, which turns glibc's
             # adaptive thresholds off: every large NumPy temporary became fresh pages from the kernel and
             # each clip took 1.9-2.0x as long as in the pool. Unset, the workers allocate as -j does.
-            with one_thread_per_worker(), dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_":
-                                                             None, "distributed.worker.profile.enabled": False}):
+            settings = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+                        "distributed.worker.profile.enabled": False}
+            settings.update(_fork_workers())
+            cluster = None
+            # The terminal's Ctrl-C is the batch's to handle, not the workers' (each printed a traceback):
+            # SIGINT is blocked while the cluster starts, so Dask's threads, and the workers they start
+            # (now and on a restart), never hear it; one pressed meanwhile is acted on when it is up.
+            with one_thread_per_worker(), dask.config.set(settings), _ctrl_c_held():
                 cluster = LocalCluster(n_workers=max(jobs, 1), threads_per_worker=1, processes=True,
                                        dashboard_address=None, silence_logs=logging.ERROR)
         except KeyboardInterrupt:
+            if cluster is not None:
+                cluster.close()
             raise
         except Exception as error:  # Dask's own failures to start (a port, a worker that did not come up)
             raise ConfigError(f"--scheduler local: the local Dask cluster did not start: "
@@ -181,6 +189,28 @@ def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOpt
         client.close()
         if cluster is not None:
             cluster.close()
+            for clip in futures.values():  # ended mid-clip with their workers: what they were writing goes
+                clear_temporaries(clip, out_abs, options)
+
+
+def _fork_workers() -> dict:
+    """Dask's setting that starts the local cluster's workers by ``fork`` (Linux, where the user did not choose
+    a method themselves): a worker is then a copy of this process, with distributed, NumPy and the
+    library already imported, instead of a fresh interpreter that imports them (``spawn``, Dask's
+    default): the cluster up in 0.08 s instead of 0.4 and closed in 0.03 instead of 0.12."""
+    import sys
+
+    import dask
+
+    chosen = dask.config.get("distributed.worker.multiprocessing-method", "spawn")
+    if not sys.platform.startswith("linux") or chosen != "spawn" or _user_chose_method():
+        return {}
+    return {"distributed.worker.multiprocessing-method": "fork"}
+
+
+def _user_chose_method() -> bool:
+    return any(name.upper() == "DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD"
+               or name.upper() == "DASK_DISTRIBUTED__WORKER__MULTIPROCESSING-METHOD" for name in os.environ)
 
 
 def convert_on_worker(*args) -> FileResult:
