@@ -5,6 +5,7 @@ Run the way users run them: a real process, its exit code and stderr, the files 
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shlex
@@ -288,17 +289,8 @@ def test_ctrl_c_while_the_workers_start_is_heard(tmp_path):
     folder = copies(tmp_path, 12)
     for delay in (0.15, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.6):
         out = tmp_path / f"out{delay}"
-        process = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", folder, out, "-j", "2"],
-                                   stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, start_new_session=True,
-                                   preexec_fn=_hears_ctrl_c)
-        time.sleep(delay)
-        os.killpg(process.pid, signal.SIGINT)
-        _, stderr = process.communicate(timeout=120)
-        # (-SIGINT: pressed while Python itself starts, before any of ours runs; a shell says 130 too)
-        assert process.returncode in (130, -signal.SIGINT), (delay, process.returncode, stderr)
-        assert "Traceback" not in stderr and "Error" not in stderr, (delay, stderr)
-        written = files_under(out) if out.exists() else []
-        assert not any(name.endswith(".tmp") for name in written), (delay, written)
+        _, stderr = _ctrl_c_into_batch(folder, out, functools.partial(time.sleep, delay))
+        assert "Error" not in stderr, (delay, stderr)
         assert len(list(out.glob("*.json"))) < 12, delay
 
 
@@ -311,25 +303,37 @@ def test_ctrl_c_on_a_local_dask_cluster_ends_the_batch_and_its_workers_quietly(t
     folder = copies(tmp_path, 12)
     for moment in ("starting", "converting"):
         out = tmp_path / f"out_{moment}"
-        process = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", folder, out, "-j", "2",
-                                    "--scheduler", "local"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                                   text=True, start_new_session=True, preexec_fn=_hears_ctrl_c)
-        if moment == "starting":
-            time.sleep(0.5)
-        else:
+
+        def converting(out=out) -> None:
             deadline = time.monotonic() + 120
-            while not list(out.glob("*.json")) and time.monotonic() < deadline and process.poll() is None:
+            while not list(out.glob("*.json")) and time.monotonic() < deadline:
                 time.sleep(0.02)
-        os.killpg(process.pid, signal.SIGINT)
-        _, stderr = process.communicate(timeout=120)
-        assert process.returncode in (130, -signal.SIGINT), (moment, process.returncode, stderr)
-        assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, (moment, stderr)
-        written = files_under(out) if out.exists() else []
-        assert not any(name.endswith(".tmp") for name in written), (moment, written)
+
+        wait = functools.partial(time.sleep, 0.5) if moment == "starting" else converting
+        process, stderr = _ctrl_c_into_batch(folder, out, wait, "--scheduler", "local")
+        assert "KeyboardInterrupt" not in stderr, (moment, stderr)
         deadline = time.monotonic() + 10
         while _group(process.pid) and time.monotonic() < deadline:
             time.sleep(0.1)
         assert not _group(process.pid), moment
+
+
+def _ctrl_c_into_batch(folder, out, wait, *options: str) -> tuple[subprocess.Popen, str]:
+    """``batch folder out -j 2 *options`` as a user runs it, Ctrl-C pressed (to the whole group, as a
+    terminal does) when ``wait`` returns; the process and its stderr, checked for what every press
+    must give: exit 130, no traceback, nothing half written."""
+    process = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", folder, out, "-j", "2",
+                                *options], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
+                               start_new_session=True, preexec_fn=_hears_ctrl_c)
+    wait()
+    os.killpg(process.pid, signal.SIGINT)
+    _, stderr = process.communicate(timeout=120)
+    # (-SIGINT: pressed while Python itself starts, before any of ours runs; a shell says 130 too)
+    assert process.returncode in (130, -signal.SIGINT), (options, process.returncode, stderr)
+    assert "Traceback" not in stderr, (options, stderr)
+    written = files_under(out) if out.exists() else []
+    assert not any(name.endswith(".tmp") for name in written), (options, written)
+    return process, stderr
 
 
 def _group(leader: int) -> list[str]:
