@@ -263,19 +263,19 @@ def test_ctrl_c_lets_running_clips_finish_and_says_what_did_not_start(tmp_path):
 
 
 def test_a_ctrl_c_held_while_workers_start_is_raised_when_they_are_up():
-    from mocap_exaggerate.jobs.pool import _ctrl_c_held
+    from mocap_exaggerate.jobs.pool import ctrl_c_held
 
     before = signal.signal(signal.SIGINT, signal.default_int_handler)  # (a test run in the background ignores it)
     try:
         with pytest.raises(KeyboardInterrupt):
-            with _ctrl_c_held():
+            with ctrl_c_held():
                 os.kill(os.getpid(), signal.SIGINT)
                 time.sleep(0.05)  # held: not raised in here
                 inside = True
         assert inside
         assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
         assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, [])  # and no longer blocked
-        with _ctrl_c_held():  # nothing pressed: nothing raised
+        with ctrl_c_held():  # nothing pressed: nothing raised
             pass
     finally:
         signal.signal(signal.SIGINT, before)

@@ -20,7 +20,7 @@ from ..core.errors import ConfigError
 from .batch_types import BatchOptions, Clip, FileResult
 from .discovery import largest_first, source_size
 from .memory import malloc_thresholds
-from .pool import _ctrl_c_held, one_thread_per_worker
+from .pool import ctrl_c_held, one_thread_per_worker
 from .task import clear_temporaries, convert_file
 
 __all__ = ["check_scheduler", "connect_dask", "run_on_dask", "convert_on_worker", "malloc_thresholds", "SchedulerLost",
@@ -85,7 +85,7 @@ def connect_dask(scheduler: str, jobs: int = 1):
             # The terminal's Ctrl-C is the batch's to handle, not the workers' (each printed a traceback):
             # SIGINT is blocked while the cluster starts, so Dask's threads, and the workers they start
             # (now and on a restart), never hear it; one pressed meanwhile is acted on when it is up.
-            with one_thread_per_worker(), dask.config.set(settings), _ctrl_c_held():
+            with one_thread_per_worker(), dask.config.set(settings), ctrl_c_held():
                 cluster = LocalCluster(n_workers=max(jobs, 1), threads_per_worker=1, processes=True,
                                        dashboard_address=None, silence_logs=logging.ERROR)
         except KeyboardInterrupt:

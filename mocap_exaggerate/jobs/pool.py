@@ -25,7 +25,7 @@ from .batch_types import BatchOptions, Clip, FileResult
 from .discovery import largest_first
 from .task import clear_temporaries, convert_file
 
-__all__ = ["run_serial", "run_pool", "default_jobs", "one_thread_per_worker"]
+__all__ = ["run_serial", "run_pool", "default_jobs", "one_thread_per_worker", "ctrl_c_held"]
 
 #: Modules a worker imports once, before its first clip.
 _PRELOAD = ["mocap_exaggerate.jobs.job", "mocap_exaggerate.jobs.task", "mocap_exaggerate.pipeline",
@@ -125,7 +125,7 @@ def run_pool(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOption
             # The forkserver and the workers start with Ctrl-C held back (blocked: the mask passes through
             # exec and fork), so that one pressed while they import prints no traceback of theirs; the
             # batch hears it when they are started, as it would while they work, and ends them cleanly.
-            with _ctrl_c_held():
+            with ctrl_c_held():
                 workers.extend(_Worker(context) for _ in range(min(jobs, len(clips))))
             drain()
         except KeyboardInterrupt:
@@ -192,7 +192,7 @@ def _worker_context():
 
 
 @contextmanager
-def _ctrl_c_held() -> Iterator[None]:
+def ctrl_c_held() -> Iterator[None]:
     """A Ctrl-C pressed while the block runs is held back and acted on when it ends, not lost.
 
     Processes started in the block never hear the terminal's Ctrl-C, which is the batch's to handle:
