@@ -23,7 +23,10 @@ def _group():
 
 
 def main() -> None:
+    from . import ctrl_c_as_usual
+
     try:
+        ctrl_c_as_usual()  # (a Ctrl-C while the command loaded ended it quietly; from here it is ours to handle)
         from mocap_exaggerate.jobs.memory import keep_freed_memory
 
         keep_freed_memory()  # one command per process: a long clip's temporaries reuse the heap's pages

@@ -674,17 +674,31 @@ def test_a_closed_standard_output_or_input_is_one_line(tmp_path):
 
 
 def test_ctrl_c_in_the_first_moments_is_quiet(tmp_path):
+    """From the first line of the command's package on, a Ctrl-C ends it quietly (exit 130). Before that
+    line Python is still starting (its site module, runpy finding the package): a Ctrl-C there is
+    Python's own, and it says so itself, with no line of ours in what it prints. The command's
+    package once imported `signal` first, whose enums take milliseconds: a window of its own."""
     import signal
     import time
+    from pathlib import Path
 
-    for delay in (0.02, 0.08, 0.2):
+    import mocap_exaggerate
+    import mocap_exaggerate_cli
+
+    ours = (str(Path(mocap_exaggerate.__file__).parent) + "/", str(Path(mocap_exaggerate_cli.__file__).parent) + "/")
+    quiet = 0
+    for delay in (0.01, 0.015, 0.02, 0.03, 0.05, 0.08, 0.2) * 3:
         process = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "info", str(CLIP)],
                                    stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         time.sleep(delay)
         process.send_signal(signal.SIGINT)
         _, said = process.communicate(timeout=60)
-        assert "Traceback" not in said, (delay, said)
+        assert not any(folder in said for folder in ours), (delay, said)  # never from a line of ours
+        if "Traceback" in said:
+            continue  # Python's own start: before the package's first line
         assert process.returncode in (0, 130, -signal.SIGINT), (delay, process.returncode, said)  # 0: it had ended
+        quiet += process.returncode == 130
+    assert quiet >= 6  # (most presses land in our part: the test would not pass on Python's start alone)
 
 
 def test_names_with_terminal_escapes_are_shown_escaped(tmp_path):
