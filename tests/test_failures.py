@@ -22,6 +22,7 @@ import pytest
 
 from mocap_exaggerate.jobs.job import check_output_set
 
+from .helpers import ended
 from .test_batch import JUMP, RUN, SIT, expected_outputs, files_under
 from .test_interrupted import long_clip
 
@@ -68,19 +69,6 @@ def writer_of(stem: str, under: int, batch_process: subprocess.Popen, timeout: f
                 return pid
         time.sleep(0.005)
     raise AssertionError(f"no process was seen writing {stem}'s outputs")
-
-
-def ended(pid: int, timeout: float = 10.0) -> bool:
-    """Whether process ``pid`` ends (or is a zombie) within ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            if Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z":
-                return True
-        except OSError:
-            return True
-        time.sleep(0.05)
-    return False
 
 
 @needs_proc

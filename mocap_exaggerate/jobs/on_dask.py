@@ -202,15 +202,13 @@ def _fork_workers() -> dict:
 
     import dask
 
+    # Dask's config already holds a method set in its files or environment; "spawn" set on purpose is told
+    # from the default by its variable.
     chosen = dask.config.get("distributed.worker.multiprocessing-method", "spawn")
-    if not sys.platform.startswith("linux") or chosen != "spawn" or _user_chose_method():
+    said = "DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD" in os.environ
+    if not sys.platform.startswith("linux") or chosen != "spawn" or said:
         return {}
     return {"distributed.worker.multiprocessing-method": "fork"}
-
-
-def _user_chose_method() -> bool:
-    return any(name.upper() == "DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD"
-               or name.upper() == "DASK_DISTRIBUTED__WORKER__MULTIPROCESSING-METHOD" for name in os.environ)
 
 
 def convert_on_worker(*args) -> FileResult:
