@@ -156,7 +156,7 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
             raise UserError("-j sets the size of --scheduler local; a Dask scheduler has the workers it has")
         check_scheduler(scheduler)  # imports Dask, which logs its own way: said with -vv (we say what matters)
         verbose = click.get_current_context().find_root().meta.get("mocap_exaggerate.verbosity", {}).get("verbose", 0)
-        logging.getLogger("distributed").setLevel(logging.INFO if verbose >= 2 else logging.CRITICAL)
+        _dask_logs(logging.INFO if verbose >= 2 else logging.CRITICAL)
     clips, problems = find_batch_clips(in_dir, out_dir, pattern)
     created = not out_dir.exists()
     _writable(out_dir)
@@ -178,3 +178,12 @@ def batch(in_dir: Path, out_dir: Path, pattern: str, jobs: int | None, resume: b
         raise
     if code:
         click.get_current_context().exit(code)
+
+
+def _dask_logs(level: int) -> None:
+    """Dask's loggers, and those of tornado, its event loop, at ``level``: each of its own (Dask's config sets
+    some, ``distributed.client`` at warning) as well as the parents. Dask logged a lost scheduler as a traceback
+    of its reconnecting; the batch says it in one line (-vv shows Dask's lines)."""
+    names = [name for name in logging.root.manager.loggerDict if name.split(".")[0] in ("distributed", "tornado")]
+    for name in {"distributed", "tornado", *names}:
+        logging.getLogger(name).setLevel(level)

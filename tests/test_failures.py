@@ -149,6 +149,52 @@ def test_a_dask_worker_lost_mid_clip_fails_that_clip_and_the_rest_go_on(tmp_path
     assert files_under(out) == expected_outputs(RUN.stem)
 
 
+@needs_proc
+@needs_dask
+def test_a_scheduler_lost_mid_batch_is_one_line_and_resume_finishes_the_rest(tmp_path):
+    """The scheduler killed while a clip converts, then its worker: the batch says so in one line (Dask's
+    client printed the traceback of its reconnecting), exit 1, and ``--resume`` converts what was not done
+    and clears what the killed worker was writing."""
+    import socket
+
+    folder = tmp_path / "mocap"
+    folder.mkdir()
+    shutil.copy(RUN, folder / RUN.name)
+    long_clip(folder, frames=6000)
+    out = tmp_path / "out"
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{probe.getsockname()[1]}"
+    dask = [sys.executable, "-m"]
+    scheduler = subprocess.Popen([*dask, "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port",
+                                  address.rsplit(":", 1)[1], "--no-dashboard"], stderr=subprocess.DEVNULL,
+                                 start_new_session=True)
+    worker = subprocess.Popen([*dask, "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-dashboard"],
+                              stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        process = subprocess.Popen(batch("-q", "batch", folder, out, "--scheduler", address, "--json"),
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        writer_of("long", worker.pid, process)
+        scheduler.kill()
+        stdout, stderr = process.communicate(timeout=300)
+    finally:
+        for started in (scheduler, worker):
+            os.killpg(started.pid, signal.SIGKILL)
+            started.wait()
+
+    assert process.returncode == 1, stderr
+    assert stderr.splitlines() == [f"ERROR: lost the Dask scheduler at {address}; 2 file(s) not done "
+                                   "(--resume finishes them)"], stderr
+
+    done = subprocess.run(batch("batch", folder, out, "--resume", "--json"), capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    statuses = {Path(json.loads(line)["input"]).stem: json.loads(line)["status"] for line in done.stdout.splitlines()}
+    assert statuses[RUN.stem] == "converted" and statuses["long"] in ("converted", "skipped"), statuses  # (done by then)
+    assert files_under(out) == expected_outputs(RUN.stem, "long")
+    assert all(check_output_set(manifest) == [] for manifest in out.glob("*.json"))
+
+
 def test_a_report_picture_that_cannot_be_drawn_is_a_warning_and_the_report_is_written(tmp_path):
     folder = tmp_path / "mocap"
     (folder / "walks").mkdir(parents=True)

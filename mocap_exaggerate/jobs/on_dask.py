@@ -81,25 +81,27 @@ def connect_dask(scheduler: str, jobs: int = 1):
             settings = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
                         "distributed.worker.profile.enabled": False}
             settings.update(_fork_workers())
-            cluster = None
+            cluster = client = None
             # The terminal's Ctrl-C is the batch's to handle, not the workers' (each printed a traceback):
-            # SIGINT is blocked while the cluster starts, so Dask's threads, and the workers they start
-            # (now and on a restart), never hear it; one pressed meanwhile is acted on when it is up.
+            # SIGINT is blocked while the cluster and its client start, so Dask's threads, and the workers
+            # they start (now and on a restart), never hear it; one pressed meanwhile is acted on when they
+            # are up. (Pressed while Dask's client waits on its loop, Dask's own cancel failed and printed a
+            # traceback: distributed 2026.8, sync's callback reading a future not yet made.)
             with one_thread_per_worker(), dask.config.set(settings), ctrl_c_held():
                 cluster = LocalCluster(n_workers=max(jobs, 1), threads_per_worker=1, processes=True,
                                        dashboard_address=None, silence_logs=logging.ERROR)
-        except KeyboardInterrupt:
+                client = Client(cluster)
+        except BaseException as error:
+            if client is not None:
+                client.close()
             if cluster is not None:
                 cluster.close()
-            raise
-        except Exception as error:  # Dask's own failures to start (a port, a worker that did not come up)
+            if not isinstance(error, Exception):  # Ctrl-C
+                raise
+            # Dask's own failures to start (a port, a worker that did not come up)
             raise ConfigError(f"--scheduler local: the local Dask cluster did not start: "
                               f"{type(error).__name__}: {error}") from None
-        try:
-            return Client(cluster), cluster
-        except BaseException:
-            cluster.close()
-            raise
+        return client, cluster
     if scheduler.startswith("tcp://"):
         _speaks_dask(scheduler)
     try:
@@ -169,14 +171,16 @@ def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOpt
                                    key=f"mocap-exaggerate-{index}-{os.getpid()}-{time.monotonic_ns()}")
             futures[future] = clip
         try:
-            for future in as_completed(list(futures)):
+            # The results come with the futures, fetched on Dask's loop: waiting for one here is waiting on
+            # a condition, where a Ctrl-C is only a KeyboardInterrupt (in future.result(), Dask's sync,
+            # one could make Dask's loop print a traceback of its own).
+            for future, result in as_completed(list(futures), with_results=True, raise_errors=False):
                 clip = futures.pop(future)
-                try:
-                    result = future.result()
-                except Exception as error:
+                if future.status != "finished":
                     if future.cancelled() or client.status != "running":  # not this clip's doing: the scheduler went
                         raise SchedulerLost(f"lost the Dask scheduler at {scheduler}") from None
                     # The task failed: its worker died (out of memory, killed) too often, say.
+                    error = result[1] if isinstance(result, tuple) else result
                     result = FileResult(str(clip.source), "failed",
                                         error=f"its Dask task failed: {type(error).__name__}: {error}")
                     clear_temporaries(clip, out_abs, options)
