@@ -70,6 +70,37 @@ def test_bytes_and_streams_in_and_out(sample_clip, tmp_path):
     assert record.manifest is None and record.outputs == {}
 
 
+class _Disk(io.RawIOBase):
+    """A raw stream, as ``sys.stdout.buffer`` is under ``PYTHONUNBUFFERED``, onto a disk with ``room`` bytes
+    left: a write takes at most 4,096 bytes and what fits, then the disk is full (ENOSPC)."""
+
+    def __init__(self, room: int) -> None:
+        self.room, self.data = room, bytearray()
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, piece) -> int:
+        if not self.room:
+            raise OSError(28, "No space left on device")
+        taken = bytes(piece[: min(4096, self.room)])
+        self.data += taken
+        self.room -= len(taken)
+        return len(taken)
+
+
+def test_a_raw_stream_gets_the_whole_bvh_or_the_disk_s_error(sample_clip):
+    """A raw stream may take part of a write and say so: the rest is written, and a full disk is an
+    error (it was a truncated BVH and exit 0 under PYTHONUNBUFFERED)."""
+    whole = io.BytesIO()
+    convert(sample_clip, whole, FAST)
+    roomy = _Disk(1 << 30)
+    convert(sample_clip, roomy, FAST)
+    assert bytes(roomy.data) == whole.getvalue()
+    with pytest.raises(OSError, match="No space left"):
+        convert(sample_clip, _Disk(len(whole.getvalue()) // 2), FAST)
+
+
 @pytest.mark.parametrize("case", ["exists", "trails exists", "input folder", "a folder in the way", "bad units",
                                   "bad name", "bad path file", "bad skin"])
 def test_a_refusal_writes_nothing(sample_clip, tmp_path, case):

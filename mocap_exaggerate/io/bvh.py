@@ -33,7 +33,7 @@ from ..core.errors import InputError, check_choice
 from ..core.motion import Motion
 from ..core.rotations import euler_blocks, quat_from_euler
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
-from .files import atomic_write
+from .files import atomic_write, write_all
 
 __all__ = ["BVHReport", "read_bvh", "read_source", "load_bvh", "save_bvh", "format_bvh", "iter_bvh", "format_fixed",
            "motion_channels", "BVH_POSITIONS", "check_bvh_positions", "written_positions"]
@@ -794,10 +794,10 @@ def save_bvh(motion: Motion, path: str | os.PathLike | BinaryIO, *, overwrite: b
     """
     data = format_bvh(motion, positions=positions)
     if hasattr(path, "write"):
-        path.write(data)
+        write_all(path, data)
         return
     if str(path) == "-":
-        sys.stdout.buffer.write(data)
+        write_all(sys.stdout.buffer, data)
         sys.stdout.buffer.flush()
         return
     atomic_write(Path(path), data, overwrite=overwrite)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import glob
 import hashlib
 import os
@@ -12,7 +13,7 @@ from pathlib import Path
 from ..core.errors import InputError, MocapError
 
 __all__ = ["OutputExistsError", "OutputSet", "atomic_write", "write_files", "same_file", "remove_stale_temporaries",
-           "digest_of", "digest_of_file", "read_limited", "read_stream", "regular_file", "LIMITS"]
+           "digest_of", "digest_of_file", "read_limited", "read_stream", "regular_file", "write_all", "LIMITS"]
 
 #: The largest file of each kind read, in bytes: a clip (a 500,000-frame take of a 100-joint rig is about
 #: 0.6 GB of text), a character (a skin, a glTF), and any small text (a pipeline file, a joint map, a
@@ -83,6 +84,24 @@ class OutputExistsError(MocapError, FileExistsError):
     def __init__(self, path: str | os.PathLike) -> None:
         self.path = Path(path)
         super().__init__(f"{path} exists")
+
+
+def write_all(stream, data: bytes) -> None:
+    """Write all of ``data`` to a binary stream, or raise OSError.
+
+    A buffered stream writes everything or raises; a raw one (``sys.stdout.buffer`` under
+    ``python -u`` or ``PYTHONUNBUFFERED``, as containers and CI often set) may write part and say
+    how much: on a full disk the rest was lost and the command ended well. Here the rest is
+    written again, and the disk's own error comes with it.
+    """
+    view = memoryview(data)
+    while view:
+        written = stream.write(view)
+        if written is None or written <= 0:  # (a non-blocking stream that would block; or nothing taken)
+            raise OSError(errno.EAGAIN if written is None else errno.EIO, "the output stream took no more")
+        if written >= len(view):
+            return
+        view = view[written:]
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:

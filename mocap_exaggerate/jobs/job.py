@@ -36,7 +36,7 @@ from ..config import DEFAULT_PRESET, GlbConfig, PipelineConfig, load_preset
 from ..core.errors import ConfigError, InputError
 from ..core.motion import Motion
 from ..io.bvh import iter_bvh, read_bvh, read_source
-from ..io.files import OutputExistsError, OutputSet, digest_of, digest_of_file, remove_stale_temporaries, same_file
+from ..io.files import OutputExistsError, OutputSet, digest_of, digest_of_file, remove_stale_temporaries, same_file, write_all
 from ..pipeline import PipelineResult, run
 from ..rig.skinning import Skin
 
@@ -352,7 +352,7 @@ def convert(
         tick = time.perf_counter()
         if to_stream:
             for piece in iter_bvh(result.motion, positions=config.output.bvh_positions):
-                output.write(piece)
+                write_all(output, piece)
             if hasattr(output, "flush"):
                 output.flush()
         else:
