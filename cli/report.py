@@ -16,6 +16,7 @@ from typing import TextIO
 
 import click
 
+from mocap_exaggerate.core.errors import printable
 from mocap_exaggerate.jobs.batch import FileResult
 
 log = logging.getLogger("mocap_exaggerate")
@@ -34,6 +35,12 @@ def _said(result: FileResult) -> str:
     """The error without the file name repeated ("a.bvh:3: ..." already names it)."""
     error = result.error or ""
     return error if error.startswith(result.input) else f"{result.input}: {error}"
+
+
+def _echo(line: str, stream: TextIO) -> None:
+    """A line about files, their names' control characters escaped (`printable`): a clip named with a
+    terminal's escape sequence, or a newline, is shown, not obeyed."""
+    click.echo(printable(line), file=stream)
 
 
 class Progress:
@@ -63,10 +70,13 @@ class Progress:
         said = [f"warning: {result.input}: {w}" for w in result.warnings if log.isEnabledFor(logging.WARNING)]
         said += [f"{result.input}: {n}" for n in result.notes if log.isEnabledFor(logging.INFO)]
         for line in said:
-            (self.bar.write if self.bar is not None else click.echo)(line, file=self.stream)
+            if self.bar is not None:
+                self.bar.write(printable(line), file=self.stream)
+            else:
+                _echo(line, self.stream)
         if self.bar is not None:
             if result.status == "failed":
-                self.bar.write(f"failed: {_said(result)}", file=self.stream)
+                self.bar.write(printable(f"failed: {_said(result)}"), file=self.stream)
             elapsed = max(time.perf_counter() - self.started, 1e-9)
             self.bar.set_postfix_str(f"{self.frames / elapsed:,.0f} frames/s", refresh=False)
             self.bar.update(1)
@@ -74,11 +84,11 @@ class Progress:
         if self.quiet:  # the summary lists the failures
             return
         if result.status == "failed":
-            click.echo(f"[{self.count}/{self.total}] failed: {_said(result)}", file=self.stream)
+            _echo(f"[{self.count}/{self.total}] failed: {_said(result)}", self.stream)
         else:
             detail = (f"{result.frames} frames, max link stretch {result.max_link_stretch:.2f}x, {result.seconds:.2f} s"
                       if result.status == "converted" else result.error)
-            click.echo(f"[{self.count}/{self.total}] {result.status} {result.input} ({detail})", file=self.stream)
+            _echo(f"[{self.count}/{self.total}] {result.status} {result.input} ({detail})", self.stream)
 
     def close(self) -> None:
         if self.bar is not None:
@@ -99,12 +109,13 @@ def summary(results: list[FileResult], seconds: float, *, workers: int | str, pe
     failed = [r for r in results if r.status == "failed"]
     if quiet:
         for result in failed:
-            click.echo(f"failed: {_said(result)}", file=stream)
+            _echo(f"failed: {_said(result)}", stream)
         return
     files = len(results) + pending
     rate = f", {frames / seconds:,.0f} frames/s" if seconds > 0 and frames else ""
     engine = f"with {workers} worker(s)" if isinstance(workers, int) else f"on {workers}"
-    click.echo(f"\n{files} file(s) in {seconds:.1f} s {engine}: {frames:,} frames converted{rate}", file=stream)
+    click.echo("", file=stream)
+    _echo(f"{files} file(s) in {seconds:.1f} s {engine}: {frames:,} frames converted{rate}", stream)
     click.echo(f"  converted  {counts['converted']:>6}", file=stream)
     click.echo(f"  skipped    {counts['skipped']:>6}", file=stream)
     click.echo(f"  failed     {counts['failed']:>6}", file=stream)
@@ -112,8 +123,8 @@ def summary(results: list[FileResult], seconds: float, *, workers: int | str, pe
         click.echo(f"  not done   {pending:>6}  (interrupted: run again with --resume to finish them)", file=stream)
     skipped = [r for r in results if r.status == "skipped" and r.error and "complete" not in r.error]
     for result in skipped:
-        click.echo(f"skipped: {_said(result)}", file=stream)
+        _echo(f"skipped: {_said(result)}", stream)
     for result in failed:
-        click.echo(f"failed: {_said(result)}", file=stream)
+        _echo(f"failed: {_said(result)}", stream)
     if report:
-        click.echo(f"report: {report}", file=stream)
+        _echo(f"report: {report}", stream)

@@ -711,6 +711,26 @@ def test_names_with_terminal_escapes_are_shown_escaped(tmp_path):
     assert done.returncode == 2 and "\x1b" not in done.stderr and "\\x1b" in done.stderr, done.stderr
 
 
+def test_a_batch_shows_clip_names_escaped(tmp_path):
+    """A clip named with a terminal's escape sequence or a newline: each line of the batch shows the name
+    escaped, as the other commands do (the name cleared the screen; a newline split a line in two)."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / "clear\x1b[2J.bvh").write_bytes(CLIP.read_bytes())
+    (folder / "two\nlines.bvh").write_bytes(b"HIERARCHY\nnot a clip\n")
+    for quiet in ([], ["-q"]):
+        done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", *quiet, "batch", str(folder),
+                               str(tmp_path / f"out{len(quiet)}"), "-j", "1", "--no-glb", "--json"],
+                              capture_output=True, timeout=300)
+        assert done.returncode == 1, done.stderr  # neither converts: one is not a clip, one not a name to write
+        assert b"\x1b" not in done.stderr + done.stdout, done.stderr
+        lines = done.stderr.decode().splitlines()
+        assert any(line.startswith("failed: ") and "two\\nlines.bvh" in line for line in lines), lines
+        assert not any(line.startswith("lines.bvh") for line in lines), lines
+        assert any(line.startswith("failed: ") and "clear\\x1b[2J.bvh" in line for line in lines), lines
+        assert len(done.stdout.splitlines()) == 2  # the JSON lines, one a clip
+
+
 def test_two_batches_into_one_folder_the_second_is_refused(tmp_path):
     import time
 
