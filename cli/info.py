@@ -74,7 +74,8 @@ def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float
             spans = ", ".join(f"{a}-{b}" for a, b in runs) or "none"
             say(f"  contact     {joint}: {spans}")
     if groups:
-        say(f"  sub-joints  {data['subjoints']} with the default 4 sub-links per link")
+        say(f"  sub-joints  {data['subjoints'] - data['joints']}: the default output's {data['subjoints']} joints "
+            "(4 sub-links per link)")
         for chain in data["groups"]:
             say(f"  group       {chain[0]} | {' > '.join(chain[1:])}")
         rigid = data["rigid"]

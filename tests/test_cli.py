@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from mocap_exaggerate import convert
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate_cli.main import cli
 
@@ -233,14 +234,17 @@ def test_bad_rubber_options_exit_2(runner, sample_clip, tmp_path, args, words):
     assert not (tmp_path / "o").exists()
 
 
-def test_info_groups(runner, sample_clip):
+def test_info_groups(runner, sample_clip, tmp_path):
     result = runner.invoke(cli, ["info", str(sample_clip), "--groups"])
     assert result.exit_code == 0, result.output
     assert "group       chest | lCollar > lShldr > lForeArm > lHand" in result.output
     assert "group       hip | rButtock > rThigh > rShin > rFoot" in result.output
     assert "rigid       leftEye" in result.output
+    assert "sub-joints  80: the default output's 123 joints" in result.output
     data = json.loads(runner.invoke(cli, ["info", str(sample_clip), "--groups", "--json"]).output)
-    assert len(data["groups"]) == 5 and data["subjoints"] == 103
+    # The joints the default output writes (it said 103, the rubber hierarchy without the links' starts).
+    written = convert(sample_clip, tmp_path, glb=False).outputs["bvh"]
+    assert len(data["groups"]) == 5 and data["subjoints"] == read_bvh(written)[0].skeleton.num_joints == 123
 
 
 def test_glb_options(runner, sample_clip, tmp_path):
