@@ -102,6 +102,7 @@ def test_a_run_the_page_asks_for_is_what_the_copied_command_writes(tuning, tmp_p
     ({"preset": "cartoon", "settings": {"extrapolate.omega": "lots"}}, 400, "settings must be an object of finite numbers"),
     ({"preset": "cartoon", "settings": {"extrapolate.omega": -5}}, 400, "extrapolate.omega must be"),
     ({"preset": "cartoon", "settings": {"input.fps": 5}}, 400, "not a setting the tuner has"),
+    ({"preset": "cartoon", "settings": {"subjoints.per_link": 2.5}}, 400, "subjoints.per_link must be a whole number"),
     (b"[" * 60_000, 400, "not JSON"),
     (b"x" * 100_000, 413, "small JSON object"),
     (b'{"preset": "cartoon", "settings": {"subjoints.per_link": Infinity}}', 400, "finite numbers"),

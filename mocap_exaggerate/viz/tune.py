@@ -75,8 +75,10 @@ def _written(key: str, value) -> str:
     """A slider's value as a setting's text: ``0.25s`` for a duration, a count as an integer, else the number."""
     if _BY_KEY[key].unit == "s":
         return f"{float(value):g}s"
-    if key == "subjoints.per_link":
-        return str(int(round(float(value))))
+    if key == "subjoints.per_link":  # a count: 2.5 is refused, as --set refuses it (it was run as 2)
+        if not float(value).is_integer():
+            raise ConfigError(f"subjoints.per_link must be a whole number, got {value!r}")
+        return str(int(float(value)))
     return repr(float(value))
 
 
