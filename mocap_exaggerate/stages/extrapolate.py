@@ -143,9 +143,13 @@ class ExtrapolateConfig:
         """
         sigma = parse_duration(self.sigma, frame_time, what="extrapolate.sigma")
         if frames is not None and sigma > max(2 * frames, 1000):
+            # (Said with the frame rate: a preset's sigma in seconds at an --fps far from the clip's own,
+            # 10,000 for a 120 fps take, is what usually makes it so wide.)
+            most = max(2 * frames, 1000)
             raise ConfigError(
-                f"extrapolate.sigma {self.sigma!r} is {sigma:.4g} frames; at most twice the clip's length "
-                f"({frames} frames) or 1000 frames"
+                f"extrapolate.sigma {self.sigma!r} is {sigma:,.4g} frames at {1.0 / frame_time:g} fps; a clip of "
+                f"{frames:,} frames takes at most {most:,} (the larger of twice its length and 1,000): "
+                "a smaller sigma, or the clip's own frame rate"
             )
         return sigma
 
