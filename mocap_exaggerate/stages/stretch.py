@@ -163,7 +163,8 @@ def overlapping(span: tuple[int, int], others) -> bool:
     return any(first <= b and a <= last for a, b in others)
 
 
-_SPEC = re.compile(r"^\s*([A-Za-z_][\w.-]*)\s*:\s*([^:]+?)\s*-\s*([^:]+?)\s*:\s*([0-9.]+)\s*((?::[^:]+)*)$")
+# (The scale is any word here: -2, 1e9 or nan is then told what a scale must be, as 6 is.)
+_SPEC = re.compile(r"^\s*([A-Za-z_][\w.-]*)\s*:\s*([^:]+?)\s*-\s*([^:]+?)\s*:\s*([^:]+?)\s*((?::[^:]+)*)$")
 
 
 def parse_stretch(text: str) -> StretchSpec:
