@@ -187,8 +187,10 @@ CASES = {
     "a folder named like an output": lambda t, c, o: (["exaggerate", c, "-o", _folder(o / "clip.glb"), "--overwrite"],
                                                       2, "folder"),
     "output is a file": lambda t, c, o: (["exaggerate", c, "-o", c], 2, "not a folder"),
-    "output folder under a file (an I/O failure, exit 1)": lambda t, c, o: (["exaggerate", c, "-o", c / "sub"], 1,
-                                                                            "clip.bvh/sub/clip.bvh"),
+    # (was exit 1 from the write, "Not a directory", after the whole run)
+    "output folder under a file": lambda t, c, o: (["exaggerate", c, "-o", c / "sub"], 2, "clip.bvh exists and is not a folder"),
+    "several clips' folder under a file": lambda t, c, o: (["exaggerate", c, c, "-o", c / "sub" / "deeper"], 2,
+                                                           "clip.bvh exists and is not a folder"),
     # 4. values the options accept, files the tool reads
     "sigma 1e9 s": lambda t, c, o: (["exaggerate", c, "-o", o, "--sigma", "1e9"], 2, "sigma"),
     "sigma 1e9 frames": lambda t, c, o: (["exaggerate", c, "-o", o, "--sigma", "1e9f"], 2, "sigma"),
