@@ -83,8 +83,11 @@ def cells_of(options: dict) -> tuple[list, int, list[str]]:
                             f"one character; give {param.opts[-1]} one value (and compare the settings of the run)")
     fixed += [word for param, values in lists if len(values) == 1 for word in (param.opts[-1], values[0])]
     if not varying:
-        raise UserError("nothing to compare: give an option a comma-separated list, e.g. --omega 2,4,6 or "
-                        "--preset subtle,cartoon,looney")
+        repeated = [f"{param.opts[-1]} {shown(str(options.get(param.name)))}" for param, values in lists
+                    if "," in str(options.get(param.name))]  # (a list of one value said again: 2,2)
+        said = f"{', '.join(repeated)} gives one value; " if repeated else ""
+        raise UserError(f"nothing to compare: {said}give an option a comma-separated list of different values, "
+                        "e.g. --omega 2,4,6 or --preset subtle,cartoon,looney")
     count = 1
     for _, values in varying:
         count *= len(values)

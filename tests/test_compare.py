@@ -111,6 +111,7 @@ def test_a_grid_page_holds_every_cells_glb(tmp_path):
 
 @pytest.mark.parametrize("args, says", [
     (["--omega", "4"], "nothing to compare"),
+    (["--omega", "2,2"], "nothing to compare: --omega '2,2' gives one value"),
     (["--omega", "2,,4"], "an empty value in the list"),
     (["--omega", "2,abc"], "--omega abc"),
     (["--omega", "1,2,3,4,5,6,7", "--sigma", "0.1s,0.2s,0.3s,0.4s,0.5s,0.6s"], "42 settings to compare; at most 36"),

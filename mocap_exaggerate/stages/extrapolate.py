@@ -128,8 +128,12 @@ class ExtrapolateConfig:
         check_number("extrapolate.omega", self.omega, 0, 50)
         check_number("extrapolate.still", self.still, 0, 10)
         check_number("extrapolate.torso", self.torso, 0, 10)
-        if self.max_speed != 0:
-            check_number("extrapolate.max_speed", self.max_speed, 1, 100)
+        if self.max_speed != 0:  # (0: no limit, said in the message too)
+            try:
+                check_number("extrapolate.max_speed", self.max_speed, 1, 100)
+            except ConfigError:
+                raise ConfigError(f"extrapolate.max_speed must be 0 (no limit) or a number in [1, 100], "
+                                  f"got {self.max_speed!r}") from None
         if parse_duration(self.smooth, 1.0, what="extrapolate.smooth") > MAX_SIGMA_SECONDS:
             raise ConfigError(f"extrapolate.smooth must be at most {MAX_SIGMA_SECONDS:g} s, got {self.smooth!r}")
         for pattern, weight in self.weights:
