@@ -70,6 +70,20 @@ def test_bytes_and_streams_in_and_out(sample_clip, tmp_path):
     assert record.manifest is None and record.outputs == {}
 
 
+def test_the_manifest_names_the_preset_a_config_is(sample_clip, tmp_path):
+    """``convert(clip, out, load_preset("looney"))``, the README's example, recorded no preset: the
+    preset a config is, setting for setting, is recorded; a changed one is none; no config is the default."""
+    from mocap_exaggerate import load_preset
+
+    looney = load_preset("looney")
+    changed = replace(looney, extrapolate=replace(looney.extrapolate, omega=3.0))
+    for name, config, expected in (("a", looney, "looney"), ("b", changed, None), ("c", None, "cartoon")):
+        record = convert(sample_clip, tmp_path / name, config, glb=False)
+        assert json.loads(record.outputs["manifest"].read_text())["preset"] == expected, name
+        pipeline = record.outputs["pipeline"].read_text()
+        assert (f'preset = "{expected}"' in pipeline) == (expected is not None), pipeline[:200]
+
+
 class _Disk(io.RawIOBase):
     """A raw stream, as ``sys.stdout.buffer`` is under ``PYTHONUNBUFFERED``, onto a disk with ``room`` bytes
     left: a write takes at most 4,096 bytes and what fits, then the disk is full (ENOSPC)."""

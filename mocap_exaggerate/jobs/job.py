@@ -169,6 +169,13 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
     return digest_of(json.dumps(fields, sort_keys=True, default=str).encode("utf-8"))
 
 
+def shipped_preset(config: PipelineConfig) -> str | None:
+    """The shipped preset ``config`` is, setting for setting; None when it is none of them (a changed one)."""
+    from ..config import preset_names
+
+    return next((name for name in preset_names() if load_preset(name) == config), None)
+
+
 def not_a_folder(folder: Path) -> Path | None:
     """The first of ``folder`` and the folders above it that exists and is not a folder (a file), if any:
     outputs cannot go there. A file on the way (``-o afile/sub``) is then refused as the folder itself is,
@@ -263,7 +270,10 @@ def convert(
     """
     started = time.perf_counter()
     if config is None:
-        config = load_preset(preset or DEFAULT_PRESET)
+        preset = preset or DEFAULT_PRESET
+        config = load_preset(preset)
+    elif preset is None:  # a shipped preset as it is (``load_preset("looney")``) is recorded as that preset
+        preset = shipped_preset(config)
     to_stream = hasattr(output, "write")
     glb = (config.glb.enabled if glb is None else glb) and not to_stream
     usd = config.glb.usd if glb else ""
