@@ -178,8 +178,54 @@ def test_a_failed_set_leaves_no_file_and_no_temporary(tmp_path):
         write_files([(tmp_path / "first.bin", b"1"), (tmp_path / "second.bin", [b"2", b"2"]),
                      (tmp_path / "third.bin", b"3")], overwrite=True)
     assert caught.value.filename == str(tmp_path / "second.bin")  # the target, not our temporary name
-    assert sorted(p.name for p in tmp_path.iterdir()) in (["second.bin"], ["first.bin", "second.bin"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["second.bin"]  # first.bin, renamed already, went again
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+@pytest.mark.parametrize("links", [True, False], ids=["hard links", "no hard links"])
+@pytest.mark.parametrize("failing", [1, 2, 3])
+def test_an_overwrite_that_fails_partway_leaves_the_folder_as_it_was(tmp_path, monkeypatch, links, failing):
+    """A set over an older one whose ``failing``-th rename fails (an immutable file, a file system gone
+    read-only): the files renamed already are put back, the retired manifest too; nothing of ours is left.
+    It left the new BVH beside the old GLB and no manifest."""
+    import os
+
+    from mocap_exaggerate.io import files
+
+    for name in ("clip.bvh", "clip.glb", "clip.json"):
+        (tmp_path / name).write_bytes(b"old " + name.encode())
+    (tmp_path / "keep.txt").write_text("untouched")
+    before = snapshot(tmp_path)
+    calls, real = [], os.replace
+
+    def replace_or_fail(source, target):
+        calls.append(target)
+        if len(calls) == failing:
+            raise PermissionError(1, "Operation not permitted")
+        return real(source, target)
+
+    with OutputSet(overwrite=True) as written:
+        for name in ("clip.bvh", "clip.glb", "new.npz"):
+            written.add(tmp_path / name, b"new " + name.encode())
+        written.add(tmp_path / "clip.json", b"new manifest")
+        monkeypatch.setattr(files.os, "replace", replace_or_fail)
+        if not links:
+            monkeypatch.setattr(files.os, "link", lambda *a, **k: (_ for _ in ()).throw(PermissionError(1, "no")))
+        with pytest.raises(PermissionError):
+            written.commit(retire_first=[tmp_path / "clip.json"])
+        monkeypatch.undo()
+    assert snapshot(tmp_path) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before)  # no temporary, no kept copy
+
+
+def test_an_overwrite_keeps_nothing_aside_once_done(tmp_path):
+    (tmp_path / "clip.bvh").write_bytes(b"old")
+    (tmp_path / "clip.json").write_bytes(b"old manifest")
+    write_files([(tmp_path / "clip.bvh", b"new")], overwrite=True)
+    with OutputSet(overwrite=True) as written:
+        written.add(tmp_path / "clip.bvh", b"newer")
+        written.commit(retire_first=[tmp_path / "clip.json"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.bvh"] and (tmp_path / "clip.bvh").read_bytes() == b"newer"
 
 
 def test_an_output_set_is_renamed_only_on_commit(tmp_path):

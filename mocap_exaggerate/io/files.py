@@ -6,6 +6,7 @@ import errno
 import glob
 import hashlib
 import os
+import secrets
 import stat
 import tempfile
 from pathlib import Path
@@ -164,18 +165,40 @@ class OutputSet:
             a half-replaced set) and old outputs this set no longer has.
         """
         self.created.clear()
-        for old in retire_first:
-            try:
-                os.unlink(old)
-            except FileNotFoundError:
-                pass
-        while self.pending:
-            tmp, path = self.pending[0]
-            try:
-                os.replace(tmp, path)
-            except OSError as error:
-                raise OSError(error.errno, error.strerror or str(error), str(path)) from None
-            self.pending.pop(0)
+        # The files the set replaces or retires are kept aside until every rename is done: a rename that
+        # fails (an immutable file, a file system gone read-only) puts them all back, so the folder is as it
+        # was, instead of holding a new BVH beside the old GLB and no manifest. Kept by a hard link where it
+        # can be (the file stays in place), else moved aside; either under a temporary's name, so that a
+        # run killed meanwhile leaves what the next run clears.
+        kept: list[tuple[str, Path]] = []
+        placed: list[Path] = []
+        try:
+            for old in retire_first:
+                _keep_aside(Path(old), kept, move=True)
+            for _, path in self.pending:
+                _keep_aside(path, kept, move=False)
+            while self.pending:
+                tmp, path = self.pending[0]
+                try:
+                    os.replace(tmp, path)
+                except OSError as error:
+                    raise OSError(error.errno, error.strerror or str(error), str(path)) from None
+                self.pending.pop(0)
+                placed.append(path)
+        except BaseException:
+            had = {path for _, path in kept}
+            for path in placed:
+                if path not in had:
+                    _remove(str(path))
+            for backup, path in reversed(kept):
+                try:
+                    os.replace(backup, path)
+                    _remove(backup)  # (a link to the file still in place: renaming onto itself does nothing)
+                except OSError:  # (what cannot be put back stays under its temporary's name)
+                    pass
+            raise
+        for backup, _ in kept:
+            _remove(backup)
 
     def abort(self) -> None:
         """Remove the temporary files not yet renamed."""
@@ -211,6 +234,28 @@ def remove_stale_temporaries(path: str | os.PathLike, *, keep: list[Path] = ()) 
                 _remove(str(stale))
                 removed.append(stale)
     return removed
+
+
+def _keep_aside(path: Path, kept: list[tuple[str, Path]], *, move: bool) -> None:
+    """Keep the file at ``path`` (if any) under a temporary's name beside it, noted in ``kept``: linked
+    (it stays in place) unless ``move``, or where the file system has no hard links."""
+    if not (path.exists() or path.is_symlink()) or (path.is_dir() and not path.is_symlink()):
+        return  # (a folder in the way is not the set's: renaming onto it fails, as it should)
+    backup = str(path.parent / f".{path.name}.{secrets.token_hex(6)}.kept.tmp")
+    if not move:
+        try:
+            os.link(path, backup, follow_symlinks=False)
+            kept.append((backup, path))
+            return
+        except OSError:
+            pass
+    try:
+        os.rename(path, backup)
+    except FileNotFoundError:
+        return
+    except OSError as error:
+        raise OSError(error.errno, error.strerror or str(error), str(path)) from None
+    kept.append((backup, path))
 
 
 def _remove(path: str) -> None:
