@@ -539,6 +539,28 @@ def test_an_output_folder_inside_the_input_folder_never_replaces_a_clip(tmp_path
     assert (nested / "a" / "x.bvh").read_bytes() == kept
 
 
+def test_a_clip_beside_the_input_folder_is_never_written_over(tmp_path):
+    """``batch in . --overwrite`` beside ``run.bvh``, a capture of the same name as ``in/run.bvh``, replaced
+    the capture. A BVH with no manifest of ours and none of a set's other files beside it is a clip: that
+    clip fails alone, the rest convert; a set of ours (or one a kill cut short) is replaced as ever."""
+    (tmp_path / "in").mkdir()
+    shutil.copy(RUN, tmp_path / "in" / "run.bvh")
+    shutil.copy(JUMP, tmp_path / "in" / "jump.bvh")
+    shutil.copy(SIT, tmp_path / "run.bvh")  # the capture
+    for extra in ([], ["--overwrite"], ["--resume"]):
+        done = command("-q", "batch", "in", ".", "--no-glb", "--json", *extra, cwd=tmp_path)
+        assert done.returncode == 1, done.stderr
+        statuses = {Path(json.loads(line)["input"]).stem: json.loads(line) for line in done.stdout.splitlines()}
+        assert "would replace run.bvh, a clip this tool did not write" in statuses["run"]["error"]
+        assert statuses["jump"]["status"] in ("converted", "skipped")
+        assert (tmp_path / "run.bvh").read_bytes() == SIT.read_bytes()
+    # A set a kill cut short between its renames (its BVH, no manifest yet, its pipeline file beside it).
+    (tmp_path / "jump.json").unlink()
+    done = command("batch", "in", ".", "--no-glb", "--overwrite", "--glob", "jump.bvh", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert check_output_set(tmp_path / "jump.json") == []
+
+
 def test_a_killed_batch_leaves_no_worker_behind(tmp_path):
     folder = copies(tmp_path, 8)
     out = tmp_path / "out"

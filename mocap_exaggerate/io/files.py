@@ -157,13 +157,19 @@ class OutputSet:
             raise OSError(error.errno, error.strerror or str(error), str(path)) from None
         return "sha256:" + digest.hexdigest()
 
-    def commit(self, *, retire_first: list[Path] = ()) -> None:
+    def commit(self, *, retire_first: list[Path] = (), late: list[Path] = ()) -> None:
         """Rename every temporary file onto its target, in order.
 
         retire_first : files to delete before anything is renamed: the old
             manifest (so that while the renames run no manifest can vouch for
             a half-replaced set) and old outputs this set no longer has.
+        late : targets renamed after the others but before the last one added (the manifest)
         """
+        if late and len(self.pending) > 1:
+            last = self.pending[-1]
+            late_set = {Path(path) for path in late}
+            self.pending = ([item for item in self.pending[:-1] if item[1] not in late_set]
+                            + [item for item in self.pending[:-1] if item[1] in late_set] + [last])
         self.created.clear()
         # The files the set replaces or retires are kept aside until every rename is done: a rename that
         # fails (an immutable file, a file system gone read-only) puts them all back, so the folder is as it

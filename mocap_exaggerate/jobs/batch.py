@@ -39,7 +39,7 @@ from pathlib import Path
 
 from ..core.errors import ConfigError
 from .batch_types import BatchInterrupted, BatchOptions, Clip, FileResult
-from .discovery import DEFAULT_GLOB, check_folders, clashes, find_clips, glob_regex, is_output, same_outputs
+from .discovery import DEFAULT_GLOB, check_folders, clashes, find_clips, foreign_clips, glob_regex, is_output, same_outputs
 from .on_dask import WAIT_FOR_WORKERS, SchedulerLost, check_scheduler, connect_dask, run_on_dask
 from .pool import default_jobs, run_pool, run_serial
 from .resume import batch_parameters, is_complete
@@ -91,6 +91,10 @@ def _run_batch(clips, out_dir, options, jobs, on_result, scheduler) -> list[File
     for clip, other in clashes(waiting(), out_dir).items():  # never write over a clip of the batch
         finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would replace the input {other}; "
                                                                     "choose an output folder apart from the clips"))
+    for clip, other in foreign_clips(waiting(), out_dir).items():  # nor a clip outside the batch
+        finished(clip, FileResult(str(clip.source), "failed", error=f"its BVH would replace {other}, a clip this tool "
+                                  "did not write (no manifest or other output of ours beside it); move it, or "
+                                  "choose another output folder"))
     for clip, other in same_outputs(waiting()).items():  # nor one clip's over another's
         finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would be those of {other.source}"))
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from ..core.errors import ConfigError
 from .batch_types import Clip, FileResult
 
-__all__ = ["DEFAULT_GLOB", "glob_regex", "find_clips", "same_outputs", "clashes", "check_folders", "is_output",
+__all__ = ["DEFAULT_GLOB", "glob_regex", "find_clips", "same_outputs", "clashes", "foreign_clips", "check_folders", "is_output",
            "read_manifest", "source_size", "largest_first"]
 
 #: Which files a batch takes: every .bvh at any depth (matched without regard to case).
@@ -199,6 +199,27 @@ def clashes(clips: list[Clip], out_dir: str | os.PathLike) -> dict[Clip, str]:
             if other is not None:
                 out[clip] = str(other.source)
                 break
+    return out
+
+
+def foreign_clips(clips: list[Clip], out_dir: str | os.PathLike) -> dict[Clip, Path]:
+    """Clips whose BVH would replace one this tool did not write: clip -> that BVH.
+
+    A BVH at the target with no manifest naming it and none of the set's other files beside it (which a
+    run writes before its BVH) is a clip, even outside the batch's folder (``batch in . --overwrite``
+    beside a capture of the same name): no clip is ever written over.
+    """
+    from .job import output_paths
+
+    out = {}
+    for clip in clips:
+        targets = output_paths(Path(out_dir) / clip.relative.parent, clip.name)
+        bvh = targets["bvh"]
+        if not bvh.is_file() or is_output(bvh):
+            continue
+        # (Not the manifest: a .json of another tool's says nothing of the BVH.)
+        if not any(targets[kind].exists() for kind in ("glb", "weights", "pipeline")):
+            out[clip] = bvh
     return out
 
 

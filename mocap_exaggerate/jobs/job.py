@@ -421,7 +421,10 @@ def convert(
             if binding is not None:
                 info["skin_binding"] = binding.summary()
             written.add(targets["manifest"], (json.dumps(info, indent=2) + "\n").encode("utf-8"))
-        written.commit(retire_first=[targets["manifest"], *retired] if "manifest" in targets else [])
+        # The BVH last before the manifest: a run killed between renames leaves its other files beside a
+        # new BVH, which tells it from a clip (`discovery.foreign_clips`), or the old BVH as it was.
+        written.commit(retire_first=[targets["manifest"], *retired] if "manifest" in targets else [],
+                       late=[targets["bvh"]] if "bvh" in outputs else [])
     return JobRecord(
         input=label,
         outputs={kind: path for kind, path in targets.items() if kind in outputs or kind == "manifest"},
