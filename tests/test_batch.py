@@ -547,6 +547,7 @@ def test_a_clip_beside_the_input_folder_is_never_written_over(tmp_path):
     shutil.copy(RUN, tmp_path / "in" / "run.bvh")
     shutil.copy(JUMP, tmp_path / "in" / "jump.bvh")
     shutil.copy(SIT, tmp_path / "run.bvh")  # the capture
+    (tmp_path / "run.glb").write_bytes(b"glTF")  # and another tool's export of it: not a set of ours
     for extra in ([], ["--overwrite"], ["--resume"]):
         done = command("-q", "batch", "in", ".", "--no-glb", "--json", *extra, cwd=tmp_path)
         assert done.returncode == 1, done.stderr
@@ -556,6 +557,7 @@ def test_a_clip_beside_the_input_folder_is_never_written_over(tmp_path):
         assert (tmp_path / "run.bvh").read_bytes() == SIT.read_bytes()
     # A set a kill cut short between its renames (its BVH, no manifest yet, its pipeline file beside it).
     (tmp_path / "jump.json").unlink()
+    assert (tmp_path / "jump.pipeline.toml").is_file()
     done = command("batch", "in", ".", "--no-glb", "--overwrite", "--glob", "jump.bvh", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert check_output_set(tmp_path / "jump.json") == []

@@ -172,6 +172,14 @@ def test_a_scheduler_lost_mid_batch_is_one_line_and_resume_finishes_the_rest(tmp
     worker = subprocess.Popen([*dask, "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-dashboard"],
                               stderr=subprocess.DEVNULL, start_new_session=True)
     try:
+        deadline = time.monotonic() + 60  # the scheduler listening before the batch asks (a refusal is exit 2)
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", int(address.rsplit(":", 1)[1])), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline and scheduler.poll() is None, "the scheduler did not start"
+                time.sleep(0.05)
         process = subprocess.Popen(batch("-q", "batch", folder, out, "--scheduler", address, "--json"),
                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         writer_of("long", worker.pid, process)

@@ -6,6 +6,7 @@ import hashlib
 import io
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -114,6 +115,17 @@ def test_a_raw_stream_gets_the_whole_bvh_or_the_disk_s_error(sample_clip):
     with pytest.raises(OSError, match="No space left"):
         convert(sample_clip, _Disk(len(whole.getvalue()) // 2), FAST)
 
+    class Sink:  # a file-like object of a caller's, whose write says nothing (None): it takes it all
+        def __init__(self) -> None:
+            self.pieces = []
+
+        def write(self, piece) -> None:
+            self.pieces.append(piece)
+
+    sink = Sink()
+    convert(sample_clip, sink, FAST)
+    assert b"".join(sink.pieces) == whole.getvalue() and all(type(piece) is bytes for piece in sink.pieces)
+
 
 @pytest.mark.parametrize("case", ["exists", "trails exists", "input folder", "a folder in the way", "bad units",
                                   "bad name", "bad path file", "bad skin"])
@@ -183,11 +195,12 @@ def test_a_failed_set_leaves_no_file_and_no_temporary(tmp_path):
 
 
 @pytest.mark.parametrize("links", [True, False], ids=["hard links", "no hard links"])
-@pytest.mark.parametrize("failing", [1, 2, 3])
+@pytest.mark.parametrize("failing", [1, 2, 3, 4])
 def test_an_overwrite_that_fails_partway_leaves_the_folder_as_it_was(tmp_path, monkeypatch, links, failing):
-    """A set over an older one whose ``failing``-th rename fails (an immutable file, a file system gone
-    read-only): the files renamed already are put back, the retired manifest too; nothing of ours is left.
-    It left the new BVH beside the old GLB and no manifest."""
+    """A set over an older one whose ``failing``-th rename fails (an immutable file, say): the files renamed
+    already are put back, the retired manifest too; nothing of ours is left. It left the new BVH beside the
+    old GLB and no manifest. Where no hard link can be made, nothing can be put back once a file is
+    replaced: then the old manifest stays retired (it would vouch for a set half replaced)."""
     import os
 
     from mocap_exaggerate.io import files
@@ -214,8 +227,50 @@ def test_an_overwrite_that_fails_partway_leaves_the_folder_as_it_was(tmp_path, m
         with pytest.raises(PermissionError):
             written.commit(retire_first=[tmp_path / "clip.json"])
         monkeypatch.undo()
+    after = snapshot(tmp_path)
+    assert not [name for name in after if name.startswith(".")]  # no temporary, no kept copy
+    if links or failing == 1:  # (the first rename failed: nothing was replaced)
+        assert after == before
+    else:  # the files that were there and are replaced stay new; one the set added goes again
+        replaced = [n for n in ["clip.bvh", "clip.glb", "new.npz"][: failing - 1] if n in before]
+        assert after == {**{n: b for n, b in before.items() if n != "clip.json"},
+                         **{n: b"new " + n.encode() for n in replaced}}
+    assert calls[:failing] == [tmp_path / n for n in ("clip.bvh", "clip.glb", "new.npz", "clip.json")][:failing]
+
+
+def test_the_bvh_is_renamed_last_but_the_manifest(tmp_path, monkeypatch):
+    """A run killed between its renames then leaves the set's other files beside a new BVH (which tells it
+    from a clip a batch must not write over), or the old BVH as it was."""
+    import os
+
+    from mocap_exaggerate.io import files
+
+    order, real = [], os.replace
+    with OutputSet(overwrite=True) as written:
+        for name in ("clip.bvh", "clip.glb", "clip.pipeline.toml", "clip.json"):
+            written.add(tmp_path / name, name.encode())
+        monkeypatch.setattr(files.os, "replace", lambda a, b: (order.append(Path(b).name), real(a, b)))
+        written.commit(late=[tmp_path / "clip.bvh"])
+    assert order == ["clip.glb", "clip.pipeline.toml", "clip.bvh", "clip.json"]
+
+
+def test_a_retired_file_that_cannot_be_moved_aside_stops_the_set_before_any_rename(tmp_path, monkeypatch):
+    import os
+
+    from mocap_exaggerate.io import files
+
+    (tmp_path / "clip.json").write_bytes(b"old manifest")
+    (tmp_path / "clip.bvh").write_bytes(b"old")
+    before = snapshot(tmp_path)
+    real = os.rename
+    with OutputSet(overwrite=True) as written:
+        written.add(tmp_path / "clip.bvh", b"new")
+        written.add(tmp_path / "clip.json", b"new manifest")
+        monkeypatch.setattr(files.os, "rename", lambda a, b: (_ for _ in ()).throw(PermissionError(1, "no"))
+                            if Path(a).name == "clip.json" else real(a, b))
+        with pytest.raises(PermissionError):
+            written.commit(retire_first=[tmp_path / "clip.json"])
     assert snapshot(tmp_path) == before
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before)  # no temporary, no kept copy
 
 
 def test_an_overwrite_keeps_nothing_aside_once_done(tmp_path):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import glob
 import hashlib
+import io
 import os
 import secrets
 import stat
@@ -95,14 +96,17 @@ def write_all(stream, data: bytes) -> None:
     how much: on a full disk the rest was lost and the command ended well. Here the rest is
     written again, and the disk's own error comes with it.
     """
+    written = stream.write(data)
+    if not isinstance(stream, io.RawIOBase):  # buffered, or a file-like object of the caller's: it took it all
+        return
     view = memoryview(data)
-    while view:
-        written = stream.write(view)
+    while True:
         if written is None or written <= 0:  # (a non-blocking stream that would block; or nothing taken)
             raise OSError(errno.EAGAIN if written is None else errno.EIO, "the output stream took no more")
         if written >= len(view):
             return
         view = view[written:]
+        written = stream.write(view)
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
@@ -170,41 +174,61 @@ class OutputSet:
             late_set = {Path(path) for path in late}
             self.pending = ([item for item in self.pending[:-1] if item[1] not in late_set]
                             + [item for item in self.pending[:-1] if item[1] in late_set] + [last])
-        self.created.clear()
-        # The files the set replaces or retires are kept aside until every rename is done: a rename that
-        # fails (an immutable file, a file system gone read-only) puts them all back, so the folder is as it
-        # was, instead of holding a new BVH beside the old GLB and no manifest. Kept by a hard link where it
-        # can be (the file stays in place), else moved aside; either under a temporary's name, so that a
-        # run killed meanwhile leaves what the next run clears.
+        # The files the set replaces are kept aside, by a hard link (each stays in place), and the ones it
+        # retires are moved aside, until every rename is done: a rename that fails (an immutable file, say)
+        # puts them all back, so the folder is as it was, instead of holding a new BVH beside the old GLB
+        # and no manifest. The kept copies have a temporary's name, so a run killed meanwhile leaves what
+        # the next run clears (as the retired files were deleted before). Where the file system has no
+        # hard links, a replaced file is not kept: a live output is never moved away.
         kept: list[tuple[str, Path]] = []
         placed: list[Path] = []
+        replaced: list[Path] = []
+        unkept: set[Path] = set()
         try:
             for old in retire_first:
                 _keep_aside(Path(old), kept, move=True)
+            retired = len(kept)
             for _, path in self.pending:
-                _keep_aside(path, kept, move=False)
+                if not _keep_aside(path, kept, move=False):
+                    unkept.add(path)
             while self.pending:
                 tmp, path = self.pending[0]
+                placed.append(path)  # (before: a Ctrl-C just after the rename is undone too)
                 try:
                     os.replace(tmp, path)
                 except OSError as error:
                     raise OSError(error.errno, error.strerror or str(error), str(path)) from None
+                replaced.append(path)
                 self.pending.pop(0)
-                placed.append(path)
         except BaseException:
-            had = {path for _, path in kept}
+            had = {path for _, path in kept} | unkept  # (a file replaced with no copy kept stays: the new one)
             for path in placed:
                 if path not in had:
-                    _remove(str(path))
-            for backup, path in reversed(kept):
+                    try:
+                        _remove(str(path))
+                    except OSError:
+                        pass
+            # A file replaced with no copy kept cannot go back: then the old manifest must not come back to
+            # vouch for a set half replaced (it stays retired, as it was before copies were kept).
+            restore = kept if not unkept.intersection(replaced) else kept[retired:]
+            for backup, path in reversed(restore):
                 try:
                     os.replace(backup, path)
                     _remove(backup)  # (a link to the file still in place: renaming onto itself does nothing)
                 except OSError:  # (what cannot be put back stays under its temporary's name)
                     pass
+            for backup, _ in kept[:retired] if restore is not kept else ():
+                try:
+                    _remove(backup)
+                except OSError:
+                    pass
             raise
+        self.created.clear()
         for backup, _ in kept:
-            _remove(backup)
+            try:
+                _remove(backup)
+            except OSError:  # (the next run clears it: a temporary's name)
+                pass
 
     def abort(self) -> None:
         """Remove the temporary files not yet renamed."""
@@ -242,26 +266,26 @@ def remove_stale_temporaries(path: str | os.PathLike, *, keep: list[Path] = ()) 
     return removed
 
 
-def _keep_aside(path: Path, kept: list[tuple[str, Path]], *, move: bool) -> None:
-    """Keep the file at ``path`` (if any) under a temporary's name beside it, noted in ``kept``: linked
-    (it stays in place) unless ``move``, or where the file system has no hard links."""
+def _keep_aside(path: Path, kept: list[tuple[str, Path]], *, move: bool) -> bool:
+    """Keep the file at ``path`` (if any) under a temporary's name beside it, noted in ``kept``: moved
+    there with ``move``, else linked (it stays in place); False where a file is there that could not be
+    linked (a file system without hard links): it is not kept."""
     if not (path.exists() or path.is_symlink()) or (path.is_dir() and not path.is_symlink()):
-        return  # (a folder in the way is not the set's: renaming onto it fails, as it should)
+        return True  # nothing to keep (a folder in the way is not the set's: renaming onto it fails, as it should)
     backup = str(path.parent / f".{path.name}.{secrets.token_hex(6)}.kept.tmp")
-    if not move:
-        try:
-            os.link(path, backup, follow_symlinks=False)
-            kept.append((backup, path))
-            return
-        except OSError:
-            pass
     try:
-        os.rename(path, backup)
+        if move:
+            os.rename(path, backup)
+        else:
+            os.link(path, backup, follow_symlinks=False)
     except FileNotFoundError:
-        return
+        return True
     except OSError as error:
+        if not move:  # no hard links here (or none to this file): replaced without a copy kept, as before
+            return False
         raise OSError(error.errno, error.strerror or str(error), str(path)) from None
     kept.append((backup, path))
+    return True
 
 
 def _remove(path: str) -> None:

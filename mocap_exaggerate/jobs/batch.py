@@ -93,7 +93,7 @@ def _run_batch(clips, out_dir, options, jobs, on_result, scheduler) -> list[File
                                                                     "choose an output folder apart from the clips"))
     for clip, other in foreign_clips(waiting(), out_dir).items():  # nor a clip outside the batch
         finished(clip, FileResult(str(clip.source), "failed", error=f"its BVH would replace {other}, a clip this tool "
-                                  "did not write (no manifest or other output of ours beside it); move it, or "
+                                  "did not write (no manifest or pipeline file of ours beside it); move it, or "
                                   "choose another output folder"))
     for clip, other in same_outputs(waiting()).items():  # nor one clip's over another's
         finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would be those of {other.source}"))

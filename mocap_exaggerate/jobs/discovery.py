@@ -205,9 +205,9 @@ def clashes(clips: list[Clip], out_dir: str | os.PathLike) -> dict[Clip, str]:
 def foreign_clips(clips: list[Clip], out_dir: str | os.PathLike) -> dict[Clip, Path]:
     """Clips whose BVH would replace one this tool did not write: clip -> that BVH.
 
-    A BVH at the target with no manifest naming it and none of the set's other files beside it (which a
-    run writes before its BVH) is a clip, even outside the batch's folder (``batch in . --overwrite``
-    beside a capture of the same name): no clip is ever written over.
+    A BVH at the target with no manifest naming it and no pipeline file beside it (which a run renames
+    before its BVH) is a clip, even outside the batch's folder (``batch in . --overwrite`` beside a
+    capture of the same name): no clip is ever written over.
     """
     from .job import output_paths
 
@@ -217,8 +217,9 @@ def foreign_clips(clips: list[Clip], out_dir: str | os.PathLike) -> dict[Clip, P
         bvh = targets["bvh"]
         if not bvh.is_file() or is_output(bvh):
             continue
-        # (Not the manifest: a .json of another tool's says nothing of the BVH.)
-        if not any(targets[kind].exists() for kind in ("glb", "weights", "pipeline")):
+        # The pipeline file, which every run writes and renames before its BVH, tells a set a kill cut short;
+        # not a .glb or a .json, which a capture folder may hold beside its clips (another tool's exports).
+        if not targets["pipeline"].exists():
             out[clip] = bvh
     return out
 

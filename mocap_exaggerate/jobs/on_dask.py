@@ -83,7 +83,7 @@ def connect_dask(scheduler: str, jobs: int = 1):
                         # Dask's event loops wake less often (its health tick every 20 ms, its system and
                         # memory monitors): with no dashboard to feed, each wake took the GIL from a clip's
                         # threads (the GLB built beside the BVH) and a core from the workers. The 22 clips'
-                        # time on the workers, summed, 10.2-10.9 s -> 9.8-9.9 s (the pool's: 8.9-9.3 s).
+                        # time on the workers, summed: 10.2-10.9 s -> 9.6-10.3 s (the pool's: 8.9-9.4 s).
                         "distributed.admin.tick.interval": "1s",
                         "distributed.admin.system-monitor.interval": "5s",
                         "distributed.worker.memory.monitor-interval": "500ms"}
@@ -178,16 +178,21 @@ def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOpt
                                    key=f"mocap-exaggerate-{index}-{os.getpid()}-{time.monotonic_ns()}")
             futures[future] = clip
         try:
-            # The results come with the futures, fetched on Dask's loop: waiting for one here is waiting on
-            # a condition, where a Ctrl-C is only a KeyboardInterrupt (in future.result(), Dask's sync,
-            # one could make Dask's loop print a traceback of its own).
-            for future, result in as_completed(list(futures), with_results=True, raise_errors=False):
+            # Waiting for the next future is waiting on a condition, where a Ctrl-C is a KeyboardInterrupt
+            # and no more. Its result is fetched with Ctrl-C held: one pressed inside Dask's sync, before its
+            # coroutine started, made Dask's loop print a traceback of its own (distributed 2026.8: its
+            # cancel read a future not yet made); held, it is raised here once the result is in. (Results
+            # fetched on Dask's loop, as_completed's with_results, were tried: a fetch that fails otherwise
+            # than by cancelling, the scheduler lost meanwhile, left the batch waiting for ever.)
+            for future in as_completed(list(futures)):
                 clip = futures.pop(future)
-                if future.status != "finished":
+                try:
+                    with ctrl_c_held():
+                        result = future.result()
+                except Exception as error:
                     if future.cancelled() or client.status != "running":  # not this clip's doing: the scheduler went
                         raise SchedulerLost(f"lost the Dask scheduler at {scheduler}") from None
                     # The task failed: its worker died (out of memory, killed) too often, say.
-                    error = result[1] if isinstance(result, tuple) else result
                     result = FileResult(str(clip.source), "failed",
                                         error=f"its Dask task failed: {type(error).__name__}: {error}")
                     clear_temporaries(clip, out_abs, options)
