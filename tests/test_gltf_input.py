@@ -8,6 +8,7 @@ with no exaggeration the run's skinned mesh is where a glTF viewer draws the inp
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -212,3 +213,17 @@ def test_the_command_line_takes_a_glb_its_clip_and_lists_the_clips_in_info(tmp_p
     bad = _cli("exaggerate", FOX, "-o", tmp_path / "bad", "--clip", "Moonwalk", cwd=tmp_path)
     assert bad.returncode == 2 and "no animation called 'Moonwalk'" in bad.stderr and "Traceback" not in bad.stderr
     assert not (tmp_path / "bad").exists()
+
+
+def test_a_character_that_leaves_the_clip_s_legs_unpaired_is_warned_of(tmp_path):
+    """The robot as the character of a human clip: its legs pair with none of the clip's, and hung still
+    with nothing said but the manifest's ``unpaired_roles``. Now a warning says which, and what to do."""
+    from .helpers import SAMPLE_DIR
+
+    record = convert(SAMPLE_DIR / "cmu_09_01_run_daz.bvh", tmp_path / "robot", skin=ROBOT)
+    said = [w for w in record.warnings if w.startswith("skin: no joint of the character pairs")]
+    assert len(said) == 1 and "left_thigh" in said[0] and "--joint-map" in said[0], record.warnings
+    unpaired = json.loads(record.outputs["manifest"].read_text())["skin_binding"]["unpaired_roles"]
+    assert all(role in said[0] for role in unpaired) and unpaired
+    human = convert(SAMPLE_DIR / "cmu_09_01_run_daz.bvh", tmp_path / "human", skin=GLTF.parent / "skin" / "makehuman_base.obj")
+    assert not [w for w in human.warnings if w.startswith("skin:")]  # every main role of a human pairs

@@ -354,6 +354,10 @@ def convert(
         unlikely = guessed_units_warning(glb_units, motion.skeleton.height())
         warnings += [unlikely] if unlikely else []
     skin, binding = character.bound_to(motion, label) if glb else (None, None)  # a skin that will not bind costs nothing
+    if binding is not None and binding.unpaired_roles:  # (said only in the manifest, the robot's legs hung still)
+        warnings.append(f"skin: no joint of the character pairs with the clip's {', '.join(binding.unpaired_roles)}: "
+                        "those parts of it move with the nearest joint paired, not as the clip does; name the "
+                        "pairs in a --joint-map file ('clip joint = skin joint' a line)")
     input_hash = digest_of(data)
     del data  # the input's bytes are not needed past this point; a long clip's are tens of MB, at the pipeline's peak
     result = run(motion, config, paths=paths)
