@@ -164,8 +164,8 @@ class OutputSet:
     def commit(self, *, retire_first: list[Path] = (), late: list[Path] = ()) -> None:
         """Rename every temporary file onto its target, in order.
 
-        retire_first : files to delete before anything is renamed: the old
-            manifest (so that while the renames run no manifest can vouch for
+        retire_first : files taken away before anything is renamed (moved aside, deleted once the set
+            is in place): the old manifest (so that while the renames run no manifest can vouch for
             a half-replaced set) and old outputs this set no longer has.
         late : targets renamed after the others but before the last one added (the manifest)
         """
@@ -184,6 +184,7 @@ class OutputSet:
         placed: list[Path] = []
         replaced: list[Path] = []
         unkept: set[Path] = set()
+        retired = 0
         try:
             for old in retire_first:
                 _keep_aside(Path(old), kept, move=True)
@@ -217,7 +218,7 @@ class OutputSet:
                     _remove(backup)  # (a link to the file still in place: renaming onto itself does nothing)
                 except OSError:  # (what cannot be put back stays under its temporary's name)
                     pass
-            for backup, _ in kept[:retired] if restore is not kept else ():
+            for backup, _ in kept[: len(kept) - len(restore)]:  # the retired ones not put back
                 try:
                     _remove(backup)
                 except OSError:
