@@ -227,3 +227,20 @@ def test_a_character_that_leaves_the_clip_s_legs_unpaired_is_warned_of(tmp_path)
     assert all(role in said[0] for role in unpaired) and unpaired
     human = convert(SAMPLE_DIR / "cmu_09_01_run_daz.bvh", tmp_path / "human", skin=GLTF.parent / "skin" / "makehuman_base.obj")
     assert not [w for w in human.warnings if w.startswith("skin:")]  # every main role of a human pairs
+
+
+def test_the_weights_file_indexes_the_glb_s_joints_without_sub_joints_too(tmp_path):
+    """With --no-subjoints a bound character's .npz listed only the joints it used (19 of 43), so its
+    indices addressed another list than the GLB skin's; now both list the output skeleton's joints."""
+    import numpy as np
+
+    from .helpers import SAMPLE_DIR
+
+    config = load_preset("cartoon").to_dict()
+    config["subjoints"] = {**config["subjoints"], "enabled": False}
+    record = convert(SAMPLE_DIR / "cmu_09_01_run_daz.bvh", tmp_path, PipelineConfig.from_dict(config),
+                     skin=GLTF.parent / "skin" / "makehuman_base.obj")
+    weights = np.load(record.outputs["weights"])
+    gltf = pygltflib.GLTF2().load(str(record.outputs["glb"]))
+    assert [str(n) for n in weights["joint_names"]] == [gltf.nodes[j].name for j in gltf.skins[0].joints]
+    assert len(weights["joint_names"]) == 43 and weights["joints"].max() < 43

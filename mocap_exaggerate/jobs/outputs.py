@@ -171,6 +171,14 @@ def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: 
     hierarchy = result.hierarchy
     if hierarchy is not None and result.motion.skeleton is hierarchy.skeleton:
         return reweight(skin, motion.skeleton, hierarchy, max_influences=influences)
+    # On the output skeleton's own joint list, as the GLB's skin lists them: a character bound to the clip
+    # names only the joints it uses, and the .npz's indices then addressed another list than the GLB's.
+    names = result.motion.skeleton.names
+    if tuple(skin.joint_names) != tuple(names):
+        where = {name: k for k, name in enumerate(names)}
+        index = np.array([where[name] for name in skin.joint_names], dtype=np.int64)
+        skin = Skin(skin.vertices, skin.faces, tuple(names), np.where(skin.weights > 0, index[skin.joints], 0),
+                    skin.weights, skin.bind, per_link=skin.per_link)
     if skin.joints.shape[1] > influences:
         rows = np.repeat(np.arange(skin.num_vertices), skin.joints.shape[1])
         joints, weights = top_influences(rows, skin.joints.ravel(), skin.weights.ravel(), skin.num_vertices, influences)
