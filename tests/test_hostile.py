@@ -202,6 +202,10 @@ CASES = {
     "info fps 1e6": lambda t, c, o: (["info", c, "--fps", "1e6"], 2, "fps"),
     "fps nan": lambda t, c, o: (["exaggerate", c, "-o", o, "--fps", "nan"], 2, "fps"),
     "omega inf": lambda t, c, o: (["exaggerate", c, "-o", o, "--omega", "inf"], 2, "omega"),
+    "stretch scale -2 (told what a scale must be, as 6 is)": lambda t, c, o: (
+        ["exaggerate", c, "-o", o, "--stretch", "left_arm:20-60:-2"], 2, "scale must be a number in [0, 5]"),
+    "stretch scale nan": lambda t, c, o: (["exaggerate", c, "-o", o, "--stretch", "left_arm:20-60:nan"], 2,
+                                          "scale must be a number in [0, 5]"),
     "max speed -1 (0 is no limit, and said so)": lambda t, c, o: (
         ["exaggerate", c, "-o", o, "--set", "extrapolate.max_speed=-1"], 2, "must be 0 (no limit) or a number in [1, 100]"),
     "sub-link length 1e-9": lambda t, c, o: (["exaggerate", c, "-o", o, "--sublink-length", "1e-9"], 2, "sublink"),
