@@ -104,12 +104,11 @@ def _exaggerate_several(input_paths, output: Path, name, overwrite, trails_path,
     for flag, value in (("--name", name), ("--trails", trails_path), ("--path-file", path_file)):
         if value is not None:
             raise UserError(f"{flag} belongs to one clip; give one input with it")
-    from mocap_exaggerate.jobs.job import not_a_folder
+    from mocap_exaggerate.io.files import not_a_folder
 
-    blocked = not_a_folder(output)
-    if blocked is not None:
-        raise UserError(f"{output}: exists and is not a folder" if blocked == output else
-                        f"{output}: {blocked} exists and is not a folder")
+    refused = not_a_folder(output)
+    if refused:
+        raise UserError(refused)
     clips = [Clip(path, Path(path.name)) for path in input_paths]
     for clip, other in same_outputs(clips).items():
         if os.path.realpath(other.source) == os.path.realpath(clip.source):

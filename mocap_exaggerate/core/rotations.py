@@ -280,19 +280,29 @@ def quat_from_euler(euler: np.ndarray, order: str) -> np.ndarray:
     return out
 
 
+def _matrix_entry(parts: tuple, row: int, col: int) -> np.ndarray:
+    """Entry ``(row, col)`` of the rotation matrix of unit quaternions ``parts = (x, y, z, w)``:
+    ``1 - 2 (a a + b b)`` on the diagonal (``a``, ``b`` the other two axes), ``2 (p q -+ r w)`` off it
+    (``r`` the third axis; plus below the diagonal's cyclic order). One expression for `quat_to_matrix`
+    and for the Euler angles read from five entries, so both give the same bits."""
+    w = parts[3]
+    if row == col:
+        a, b = (parts[k] for k in range(3) if k != row)
+        return 1.0 - 2.0 * (a * a + b * b)
+    low, high = sorted((row, col))
+    third = parts[3 - row - col]
+    if (col - row) % 3 == 2:
+        return 2.0 * (parts[low] * parts[high] + third * w)
+    return 2.0 * (parts[low] * parts[high] - third * w)
+
+
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (they act on column vectors)."""
-    x, y, z, w = _parts(q)
+    parts = _parts(q)
     out = np.empty(np.shape(q)[:-1] + (3, 3))
-    out[..., 0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    out[..., 0, 1] = 2.0 * (x * y - z * w)
-    out[..., 0, 2] = 2.0 * (x * z + y * w)
-    out[..., 1, 0] = 2.0 * (x * y + z * w)
-    out[..., 1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    out[..., 1, 2] = 2.0 * (y * z - x * w)
-    out[..., 2, 0] = 2.0 * (x * z - y * w)
-    out[..., 2, 1] = 2.0 * (y * z + x * w)
-    out[..., 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    for row in range(3):
+        for col in range(3):
+            out[..., row, col] = _matrix_entry(parts, row, col)
     return out
 
 
@@ -337,21 +347,14 @@ def _euler_from_quat(q: np.ndarray, order: str) -> np.ndarray:
     ``c = atan2(-s R[i, j], R[i, i])`` with ``s`` the parity of the axis permutation; ``b`` is taken
     by atan2 too, which keeps its digits near 90 degrees. At gimbal lock ``a`` and ``c`` are
     arbitrary: callers settle them. Only the five entries of ``R`` read are made, each by
-    `quat_to_matrix`'s own expression (the same bits as from the whole matrix, 40 % less work).
+    `_matrix_entry`, as `quat_to_matrix` makes them (the same bits as from the whole matrix, 40 % less work).
     """
-    x, y, z, w = _parts(q)
-    entries = {
-        (0, 0): lambda: 1.0 - 2.0 * (y * y + z * z), (0, 1): lambda: 2.0 * (x * y - z * w),
-        (0, 2): lambda: 2.0 * (x * z + y * w), (1, 0): lambda: 2.0 * (x * y + z * w),
-        (1, 1): lambda: 1.0 - 2.0 * (x * x + z * z), (1, 2): lambda: 2.0 * (y * z - x * w),
-        (2, 0): lambda: 2.0 * (x * z - y * w), (2, 1): lambda: 2.0 * (y * z + x * w),
-        (2, 2): lambda: 1.0 - 2.0 * (x * x + y * y),
-    }
+    parts = _parts(q)
     i, j, k = ("XYZ".index(a) for a in order)
     sign = 1.0 if (j - i) % 3 == 1 else -1.0
-    ii, ij = entries[i, i](), entries[i, j]()
-    b = np.arctan2(sign * entries[i, k](), np.hypot(ii, ij))
-    a = np.arctan2(-sign * entries[j, k](), entries[k, k]())
+    ii, ij = _matrix_entry(parts, i, i), _matrix_entry(parts, i, j)
+    b = np.arctan2(sign * _matrix_entry(parts, i, k), np.hypot(ii, ij))
+    a = np.arctan2(-sign * _matrix_entry(parts, j, k), _matrix_entry(parts, k, k))
     c = np.arctan2(-sign * ij, ii)
     return np.degrees(np.stack([a, b, c], axis=-1))
 

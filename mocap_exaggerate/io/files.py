@@ -15,7 +15,8 @@ from pathlib import Path
 from ..core.errors import InputError, MocapError
 
 __all__ = ["OutputExistsError", "OutputSet", "atomic_write", "write_files", "same_file", "remove_stale_temporaries",
-           "digest_of", "digest_of_file", "read_limited", "read_stream", "regular_file", "write_all", "LIMITS"]
+           "digest_of", "digest_of_file", "read_limited", "read_stream", "regular_file", "write_all", "not_a_folder",
+           "LIMITS"]
 
 #: The largest file of each kind read, in bytes: a clip (a 500,000-frame take of a 100-joint rig is about
 #: 0.6 GB of text), a character (a skin, a glTF), and any small text (a pipeline file, a joint map, a
@@ -107,6 +108,20 @@ def write_all(stream, data: bytes) -> None:
             return
         view = view[written:]
         written = stream.write(view)
+
+
+def not_a_folder(folder: str | os.PathLike) -> str | None:
+    """Why outputs cannot go into ``folder``, in a line, when it or a folder above it exists and is not a
+    folder (a file, a link to nothing); None when they can. A file on the way (``-o afile/sub``) is then
+    refused as the folder itself is, before any work (it was "Not a directory" from the write, exit 1,
+    after the whole run)."""
+    folder = Path(folder)
+    for path in (folder, *folder.parents):
+        if path.exists() and path.is_dir():
+            return None
+        if path.exists() or path.is_symlink():
+            return f"{folder}: exists and is not a folder" if path == folder else f"{folder}: {path} exists and is not a folder"
+    return None
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:

@@ -36,12 +36,21 @@ from ..config import DEFAULT_PRESET, GlbConfig, PipelineConfig, load_preset
 from ..core.errors import ConfigError, InputError
 from ..core.motion import Motion
 from ..io.bvh import iter_bvh, read_bvh, read_source
-from ..io.files import OutputExistsError, OutputSet, digest_of, digest_of_file, remove_stale_temporaries, same_file, write_all
+from ..io.files import (
+    OutputExistsError,
+    OutputSet,
+    digest_of,
+    digest_of_file,
+    not_a_folder,
+    remove_stale_temporaries,
+    same_file,
+    write_all,
+)
 from ..pipeline import PipelineResult, run
 from ..rig.skinning import Skin
 
-__all__ = ["JobRecord", "Character", "convert", "output_paths", "check_name", "check_targets", "not_a_folder",
-           "check_output_set", "describe", "parameters_digest", "recorded_config"]
+__all__ = ["JobRecord", "Character", "convert", "output_paths", "check_name", "check_targets", "check_output_set",
+           "describe", "parameters_digest", "recorded_config"]
 
 #: Longest output name accepted: leaves room for suffixes and temporary names within 255 bytes.
 MAX_NAME = 200
@@ -176,18 +185,6 @@ def shipped_preset(config: PipelineConfig) -> str | None:
     return next((name for name in preset_names() if load_preset(name) == config), None)
 
 
-def not_a_folder(folder: Path) -> Path | None:
-    """The first of ``folder`` and the folders above it that exists and is not a folder (a file), if any:
-    outputs cannot go there. A file on the way (``-o afile/sub``) is then refused as the folder itself is,
-    before any work (it was "Not a directory" from the write, exit 1, after the whole run)."""
-    for path in (folder, *folder.parents):
-        if path.exists():
-            return None if path.is_dir() else path
-        if path.is_symlink():  # a link to nothing: not a folder either
-            return path
-    return None
-
-
 def check_targets(targets: dict[str, Path], inputs: list[Path], overwrite: bool) -> None:
     """Refuse, before anything runs, targets that are an input, a folder, named twice, or taken.
 
@@ -310,10 +307,9 @@ def convert(
         targets = {"trails": Path(trails)} if trails is not None else {}
     else:
         folder = Path(output)
-        blocked = not_a_folder(folder)
-        if blocked is not None:
-            raise ConfigError(f"{folder}: exists and is not a folder" if blocked == folder else
-                              f"{folder}: {blocked} exists and is not a folder")
+        refused = not_a_folder(folder)
+        if refused:
+            raise ConfigError(refused)
         targets = output_paths(folder, stem, glb=glb, trails=trails, usd=usd, fbx=fbx)
     # Outputs of an earlier run with the GLB (or a USD file) that this run will not write: they would
     # sit beside a manifest that does not list them. Refused like any output, removed with overwrite.
