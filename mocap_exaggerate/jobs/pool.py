@@ -118,7 +118,10 @@ def run_pool(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOption
             hand_out()
             while running:
                 for future in wait(list(running), return_when=FIRST_COMPLETED)[0]:
-                    collect(future)
+                    # Whole or not at all: a Ctrl-C between taking a finished clip off `running` and
+                    # reporting it lost the clip (its outputs complete, the batch said "not done").
+                    with ctrl_c_held():
+                        collect(future)
                 hand_out()
 
         try:
