@@ -319,7 +319,7 @@ def measure_rig(task: tuple) -> list[dict]:
     path, rig, settings, bodies, cut, step = task
     from mocap_exaggerate.analysis.branches import minor_branches
     from mocap_exaggerate.io.bvh import read_bvh
-    from mocap_exaggerate.jobs.outputs import base_skin, output_skin, output_thickness
+    from mocap_exaggerate.jobs.outputs import at_bind_pose, base_skin, output_skin, output_thickness
     from mocap_exaggerate.pipeline import run
     from mocap_exaggerate.rig.binding import bind_skin
     from mocap_exaggerate.rig.body import default_skin
@@ -357,11 +357,19 @@ def measure_rig(task: tuple) -> list[dict]:
         for body in bodies:
             tick = time.perf_counter()
             try:
+                # A character bound in its own pose (`Skin.pose`) is posed from there, as the GLB's rest.
+                shown, turns = out_skeleton, rotations
                 if setting == "captured":
                     skin = bound[body] if body == "makehuman" else default_skin(skeleton)
+                    if skin.pose:
+                        posed, _, skin = at_bind_pose(motion, None, skin)
+                        shown, turns = posed.skeleton, posed.world_rotations()
                 else:
-                    skin = output_skin(motion, result, base_skin(motion, result, bound.get(body)))
-                figures = measure_body(skin, out_skeleton, rotations, positions, thickness, height, step, carried)
+                    clip, posed, based = at_bind_pose(motion, result, base_skin(motion, result, bound.get(body)))
+                    skin = output_skin(clip, posed, based)
+                    if posed is not result:
+                        shown, turns = posed.motion.skeleton, posed.world_rotations
+                figures = measure_body(skin, shown, turns, positions, thickness, height, step, carried)
             except Exception as error:  # noqa: BLE001
                 rows.append({**base, "body": body, "error": f"{type(error).__name__}: {error}"})
                 continue

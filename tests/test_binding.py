@@ -13,6 +13,7 @@ import pytest
 from mocap_exaggerate.core.errors import ConfigError, InputError
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.skin import load_skin
+from mocap_exaggerate.jobs.outputs import at_bind_pose
 from mocap_exaggerate.rig.binding import bind_skin, joint_roles, pair_joints, read_joint_map, skin_skeleton
 from mocap_exaggerate.rig.body import default_skin
 from mocap_exaggerate.rig.skinning import Skin, pose_skin
@@ -79,8 +80,8 @@ def test_the_fitted_body_puts_each_paired_joint_where_the_clip_has_it(path, make
     """In the clip's rest pose, the fitted mesh around each paired joint sits where that joint is:
     the mesh is in the clip's units and axes, not MakeHuman's decimetres and Y up."""
     motion = clip_motion(path)
-    skeleton = motion.skeleton
-    bound, binding = bind_skin(makehuman, skeleton)
+    bound, binding = bind_skin(makehuman, motion.skeleton)
+    skeleton = at_bind_pose(motion, None, bound)[0].skeleton  # the rest posed as the body is bound
     assert set(bound.joint_names) <= set(skeleton.names)
     np.testing.assert_allclose(bound.weights.sum(axis=1), 1.0, atol=1e-9)
     rest = skeleton.rest_positions()
@@ -140,8 +141,8 @@ def test_the_body_stays_on_the_skeleton_through_the_captured_motion(name, makehu
     from mocap_exaggerate.rig.skinning import segment_distance
 
     motion = clip_motion(shared(name))
+    motion, _, bound = at_bind_pose(motion, None, bind_skin(makehuman, motion.skeleton)[0])
     skeleton = motion.skeleton
-    bound, _ = bind_skin(makehuman, skeleton)
     rotations, positions = motion.forward_kinematics()
     index = np.array([skeleton.index(n) for n in bound.joint_names])
     edges = np.concatenate([bound.faces[:, [0, 1]], bound.faces[:, [1, 2]], bound.faces[:, [2, 0]]])
@@ -366,3 +367,85 @@ def test_the_cli_binds_the_makehuman_body_and_says_how(tmp_path):
     done = subprocess.run([*CLI, "exaggerate", str(clip), "-o", str(again), "--joint-map", str(wrong)],
                           capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert done.returncode == 2 and "give the skin too" in done.stderr
+
+
+def test_a_rest_pose_turned_by_hand_moves_the_offsets_and_keeps_every_frame():
+    """Known answer: a chain root -> a -> b along +Y, its rest posed by a quarter turn about Z at the
+    root, rests along -X (offsets turned into the pose); a frame with no rotation keeps its positions
+    along +Y, its root now turned back a quarter (-90 degrees about Z) and ``a`` untouched."""
+    from mocap_exaggerate.core.motion import Motion
+    from mocap_exaggerate.core.skeleton import Skeleton
+
+    rotation = ("Zrotation", "Xrotation", "Yrotation")
+    skeleton = Skeleton(("root", "a", "b"), [-1, 0, 1], [[0, 0, 0], [0, 1, 0], [0, 1, 0]],
+                        (("Xposition", "Yposition", "Zposition") + rotation, rotation, rotation),
+                        np.array([[np.nan] * 3, [np.nan] * 3, [0, 0.5, 0]]))
+    motion = Motion(skeleton, 1 / 30, np.tile([0.0, 0, 0, 1], (1, 3, 1)), skeleton.offsets[None].copy())
+    half = np.sqrt(0.5)
+    posed = motion.with_rest(np.array([[0, 0, half, half], [0, 0, 0, 1], [0, 0, 0, 1]]))
+    np.testing.assert_allclose(posed.skeleton.rest_positions(), [[0, 0, 0], [-1, 0, 0], [-2, 0, 0]], atol=1e-12)
+    np.testing.assert_allclose(posed.skeleton.end_sites[2], [-0.5, 0, 0], atol=1e-12)
+    assert np.isnan(posed.skeleton.end_sites[:2]).all()
+    np.testing.assert_allclose(posed.world_positions()[0], [[0, 0, 0], [0, 1, 0], [0, 2, 0]], atol=1e-12)
+    np.testing.assert_allclose(posed.local_rotations[0], [[0, 0, -half, half], [0, 0, 0, 1], [0, 0, 0, 1]],
+                               atol=1e-12)
+    with pytest.raises(ValueError, match="pose must be"):
+        motion.with_rest(np.zeros((2, 4)))
+
+
+ICLONE = ["cmu_06_15_basketball_dribble_shoot_iclone.bvh", "cmu_05_06_dance_cartwheel_start_iclone.bvh"]
+
+
+def _beyond_twice(skin: Skin, own: np.ndarray, vertices: list[np.ndarray]) -> float:
+    """Share of faces with an edge past 2x its length on ``own`` (the body's own vertices) in any of ``vertices``."""
+    edges = np.concatenate([skin.faces[:, [0, 1]], skin.faces[:, [1, 2]], skin.faces[:, [2, 0]]])
+    length = np.linalg.norm(np.diff(own[edges], axis=1)[:, 0], axis=1)
+    worst = np.zeros(len(skin.faces))
+    for v in vertices:
+        ratio = np.linalg.norm(np.diff(v[edges], axis=1)[:, 0], axis=1) / length
+        worst = np.maximum(worst, ratio.reshape(3, -1).max(axis=0))
+    return float(np.mean(worst > 2.0))
+
+
+@needs_makehuman
+@pytest.mark.parametrize("name", ICLONE)
+def test_a_rig_resting_with_its_limbs_straight_up_is_bound_with_them_posed_like_the_body(name, makehuman):
+    """iClone's (Reallusion CC) rest pose has every bone along +Y: legs and arms straight up. Fitted
+    there, each leg's map turned the mesh by 170 degrees and skinning pinched the hips and shoulders
+    shut as the limbs came back down: 2.2 % of the faces past twice their length on the body itself
+    before any motion, 3.7 % through the clip. Bound with the clip's limbs posed like the body's
+    (measured 0.5 % and 1.7-2.5 %), with every frame's positions as they were."""
+    motion = clip_motion(shared(name))
+    bound, binding = bind_skin(makehuman, motion.skeleton)
+    assert binding.posed >= 8 and len(bound.pose) == binding.posed
+    posed, _, body = at_bind_pose(motion, None, bound)
+    assert not body.pose  # taken into the skeleton's rest: not applied twice
+    height = motion.skeleton.height()
+    np.testing.assert_allclose(posed.world_positions(), motion.world_positions(), atol=1e-9 * height)
+    rest = posed.skeleton.rest_positions()
+    roles = joint_roles(motion.skeleton)[0]
+    for side in ("left", "right"):  # the legs hang and the arms come down, as on the body (an A-pose)
+        assert rest[roles[f"{side}_foot"], 1] < rest[roles[f"{side}_thigh"], 1] - 60.0
+        assert rest[roles[f"{side}_hand"], 1] < rest[roles[f"{side}_upper_arm"], 1] - 20.0
+    own = makehuman.vertices * binding.scale
+    assert _beyond_twice(body, own, [body.vertices]) < 0.01
+    rotations, positions = posed.forward_kinematics()
+    index = np.array([posed.skeleton.index(n) for n in body.joint_names])
+    frames = np.linspace(0, motion.num_frames - 1, 12).astype(int)
+    shapes = [pose_skin(body, rest, rotations[f], positions[f], index) for f in frames]
+    assert _beyond_twice(body, own, shapes) < 0.03
+
+
+@needs_makehuman
+def test_a_rig_resting_near_the_bodys_pose_is_posed_only_in_its_limbs(makehuman):
+    """A Daz clip rests in a T-pose: its arms turn down to the body's A-pose, its trunk and root do not
+    (the placement is fitted to the trunk), and an unbound body or the default one carries no pose."""
+    motion = clip_motion(shared("cmu_09_01_run_daz.bvh"))
+    bound, binding = bind_skin(makehuman, motion.skeleton)
+    roles, chains = joint_roles(motion.skeleton)
+    trunk = {motion.skeleton.names[j] for j in [roles["hips"], *chains["spine"], *chains.get("neck", [])]}
+    assert bound.pose and not (set(bound.pose) & trunk)
+    assert motion.skeleton.names[roles["left_upper_arm"]] in bound.pose
+    assert not default_skin(motion.skeleton).pose
+    same = at_bind_pose(motion, None, default_skin(motion.skeleton))
+    assert same[0] is motion

@@ -103,7 +103,9 @@ def captured_row(motion, bound, meters: float, up: tuple[int, float]) -> Row:
     reference); written by the GLB writer itself, as the run's GLBs are."""
     from mocap_exaggerate.analysis.branches import minor_branches
     from mocap_exaggerate.io.gltf import glb_pieces
+    from mocap_exaggerate.jobs.outputs import at_bind_pose
 
+    motion, _, bound = at_bind_pose(motion, None, bound)  # bound in its own pose: the GLB's rest
     rotations, positions = motion.forward_kinematics()
     glb = b"".join(glb_pieces(motion, bound, meters_per_unit=meters, up=up))
     return Row(glb, bound, motion.skeleton, rotations, positions, None, ~minor_branches(motion.skeleton))
@@ -112,16 +114,18 @@ def captured_row(motion, bound, meters: float, up: tuple[int, float]) -> Row:
 def output_row(motion, config, skin=None) -> Row:
     """A run's GLB (``make_glb``, with ``skin`` or the default body) and its skin on the output skeleton."""
     from mocap_exaggerate.analysis.branches import minor_branches
-    from mocap_exaggerate.jobs.outputs import base_skin, make_glb, output_skin, output_thickness
+    from mocap_exaggerate.jobs.outputs import at_bind_pose, base_skin, make_glb, output_skin, output_thickness
     from mocap_exaggerate.pipeline import run
 
     result = run(motion, config)
+    glb = make_glb(motion, result, skin)[0]
+    clip, result, based = at_bind_pose(motion, result, base_skin(motion, result, skin))  # the GLB's rest
     rotations, positions = result.motion.forward_kinematics()  # what the GLB's tracks give
     carried = np.ones(result.motion.skeleton.num_joints, bool)
     carried[result.original_index] = ~(result.hierarchy.rigid if result.hierarchy is not None
                                        else minor_branches(motion.skeleton))
-    return Row(make_glb(motion, result, skin)[0], output_skin(motion, result, base_skin(motion, result, skin)),
-               result.motion.skeleton, rotations, positions, output_thickness(result), carried)
+    return Row(glb, output_skin(clip, result, based), result.motion.skeleton, rotations, positions,
+               output_thickness(result), carried)
 
 
 def measure(row: Row, height: float, frames: list[int] | None = None, *, distances: bool = False) -> dict:

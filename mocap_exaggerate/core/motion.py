@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .kinematics import forward_kinematics
+from .rotations import quat_identity, quat_inv, quat_mul, quat_rotate
 from .skeleton import Skeleton
 
 __all__ = ["Motion"]
@@ -96,3 +97,24 @@ class Motion:
     def world_rotations(self) -> np.ndarray:
         """(F, J, 4) float64 world orientation of every joint."""
         return self.forward_kinematics()[0]
+
+    def with_rest(self, pose: np.ndarray) -> Motion:
+        """The same motion on a skeleton whose rest pose is this one's posed by ``pose``.
+
+        pose : (J, 4) local rotations; the new skeleton's rest pose is this skeleton
+            with them applied (its offsets and end sites turned into it)
+
+        Every frame's world positions are kept exactly (up to rounding); each joint's
+        world orientation becomes ``W W_pose^-1``, its turn away from the new rest.
+        So a character bound in that pose skins as it was bound, and the
+        skeleton's rest is the pose a DCC shows. Where a rig's rest pose is a
+        stick with every bone along one axis (iClone, Reallusion CC), a mesh
+        bound to it collapses where the limbs turn back down; posed like the
+        mesh, it does not (`mocap_exaggerate.rig.binding.bind_pose`).
+        """
+        skeleton = self.skeleton
+        rested, world = skeleton.posed(pose)
+        above = np.concatenate([quat_identity((1,)), world[skeleton.parents[1:]]])  # the parent's, the root's none
+        rotations = quat_mul(quat_mul(above, self.local_rotations), quat_inv(world))
+        rotations *= np.where(rotations[..., 3:] < 0.0, -1.0, 1.0)
+        return Motion(rested, self.frame_time, rotations, quat_rotate(above, self.local_positions))

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import fnmatch
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .errors import check_choice
-from .kinematics import rest_positions
+from .kinematics import forward_kinematics, rest_positions
+from .rotations import quat_identity, quat_rotate
 
 __all__ = ["Skeleton", "POSITION_CHANNELS", "ROTATION_CHANNELS"]
 
@@ -165,6 +166,21 @@ class Skeleton:
     def rest_positions(self) -> np.ndarray:
         """World positions of the joints in the rest pose (offsets only), ``(J, 3)``."""
         return rest_positions(self.parents, self.offsets)
+
+    def posed(self, pose: np.ndarray) -> tuple[Skeleton, np.ndarray]:
+        """This skeleton with ``pose`` for its rest pose, and that pose's world rotations ``(J, 4)``.
+
+        pose : (J, 4) local rotations; each offset (and End Site) is turned into the pose,
+            so the new rest positions are this skeleton's posed by them (see `Motion.with_rest`)
+        """
+        pose = np.asarray(pose, dtype=np.float64)
+        if pose.shape != (self.num_joints, 4):
+            raise ValueError(f"pose must be ({self.num_joints}, 4), got {pose.shape}")
+        world = forward_kinematics(self.parents, pose[None], np.zeros((1, self.num_joints, 3)))[0][0]
+        above = np.concatenate([quat_identity((1,)), world[self.parents[1:]]])
+        end_sites = quat_rotate(world, np.nan_to_num(self.end_sites))
+        end_sites[np.isnan(self.end_sites)] = np.nan
+        return replace(self, offsets=quat_rotate(above, self.offsets), end_sites=end_sites), world
 
     def link_lengths(self) -> np.ndarray:
         """Rest length of the link from each joint's parent to it, ``(J,)``; 0 for the root."""

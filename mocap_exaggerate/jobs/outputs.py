@@ -6,7 +6,7 @@ where they go and writes them.
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -16,13 +16,13 @@ from ..config import PipelineConfig
 from ..core.errors import ConfigError
 from ..core.kinematics import cache_blocks
 from ..core.motion import Motion
-from ..core.rotations import vector_norm
+from ..core.rotations import quat_identity, vector_norm
 from ..io.bvh import written_positions
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin, top_influences
 
-__all__ = ["manifest", "output_thickness", "base_skin", "output_skin", "make_glb", "glb_files", "captured_glb",
-           "CharacterFiles"]
+__all__ = ["manifest", "output_thickness", "base_skin", "at_bind_pose", "output_skin", "make_glb", "glb_files",
+           "captured_glb", "CharacterFiles"]
 
 
 def manifest(
@@ -157,6 +157,35 @@ def base_skin(motion: Motion, result: PipelineResult, skin: Skin | None = None,
     return bind_skin(skin, skeleton, joint_map)[0]
 
 
+def at_bind_pose(motion: Motion, result: PipelineResult | None, skin: Skin
+                 ) -> tuple[Motion, PipelineResult | None, Skin]:
+    """The captured clip, the run and ``skin`` (bound to the clip, `base_skin`) with the pose the skin
+    is bound in as the skeletons' rest pose: as they are when it is bound in the rest pose itself.
+
+    A character bound to a clip whose rest pose is far from its own is bound with the clip's
+    limbs posed like its own (`Skin.pose`, `mocap_exaggerate.rig.binding.bind_skin`). The clip
+    and the run are then the same motion on skeletons resting in that pose
+    (`Motion.with_rest`): every frame's positions as they were, the GLB's rest pose the
+    character's, and linear blend skinning from there as from any rest pose. The sub-joints
+    rest along their links as before (a cut link's sub-joints turn with its first joint).
+    """
+    if not skin.pose:
+        return motion, result, skin
+    pose = np.tile(quat_identity(), (motion.skeleton.num_joints, 1))
+    for name, turn in skin.pose.items():
+        pose[motion.skeleton.index(name)] = turn
+    posed = motion.with_rest(pose)
+    if result is not None:
+        output_pose = np.tile(quat_identity(), (result.motion.skeleton.num_joints, 1))
+        output_pose[result.original_index] = pose
+        output = result.motion.with_rest(output_pose)
+        hierarchy = result.hierarchy
+        if hierarchy is not None and result.motion.skeleton is hierarchy.skeleton:
+            hierarchy = replace(hierarchy, skeleton=output.skeleton)  # (the re-weighting reads its rest)
+        result = replace(result, motion=output, hierarchy=hierarchy)
+    return posed, result, replace(skin, pose={})
+
+
 def output_skin(motion: Motion, result: PipelineResult, skin: Skin, influences: int = 4) -> Skin:
     """``skin`` (on the clip's joints) bound to the output skeleton, with at most ``influences`` per vertex.
 
@@ -219,7 +248,8 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
     from ..io.skin import npz_bytes
 
     scale, how = unit_scale(units, motion.skeleton.height())
-    bound = output_skin(motion, result, base_skin(motion, result, skin, joint_map), influences)
+    motion, result, based = at_bind_pose(motion, result, base_skin(motion, result, skin, joint_map))
+    bound = output_skin(motion, result, based, influences)
     from ..analysis.limbs import standing_up
 
     step = max(motion.num_frames // 64, 1)  # a sample of the clip tells which way is up
@@ -246,6 +276,6 @@ def captured_glb(motion: Motion, result: PipelineResult, skin: Skin | None = Non
     scale, _ = unit_scale(units, motion.skeleton.height())
     step = max(motion.num_frames // 64, 1)
     up = standing_up(motion.skeleton, motion.slice(slice(None, None, step)).world_positions())
-    shown = motion.slice(slice(result.rest_frames, None)) if result.rest_frames_dropped else motion
-    return b"".join(glb_pieces(shown, base_skin(motion, result, skin), meters_per_unit=scale, up=up,
-                               name="captured"))
+    shown, _, body = at_bind_pose(motion, None, base_skin(motion, result, skin))
+    shown = shown.slice(slice(result.rest_frames, None)) if result.rest_frames_dropped else shown
+    return b"".join(glb_pieces(shown, body, meters_per_unit=scale, up=up, name="captured"))

@@ -1,9 +1,9 @@
-"""Binding a character made for another rig to a clip: pair the joints, fit the mesh to the clip's rest pose.
+"""Binding a character made for another rig to a clip: pair the joints, pose the clip like it, fit the mesh.
 
 A user's character (the MakeHuman body in its A-pose, Y up, in decimetres; a
 GLB exported from Blender) rarely shares the clip's skeleton. `bind_skin`
-turns it into a skin on the clip's own joints, in the clip's rest pose, which
-is what the rest of the tool takes:
+turns it into a skin on the clip's own joints, with the clip's limbs posed like
+the character's, which is what the rest of the tool takes:
 
 1. **Pair joints** (`pair_joints`). First what the user named (a joint map,
    ``clip joint = skin joint``); then the joints whose *role* both skeletons
@@ -17,7 +17,15 @@ is what the rest of the tool takes:
    fitted to the paired trunk joints (Umeyama 1991), which differ little
    between an A-pose and a T-pose. This carries Y-up decimetres onto Z-up
    inches, and the character's front onto the clip's.
-3. **Fit each bone.** Every paired clip joint gets an affine map that takes
+3. **Pose the clip like the character** (`_limb_pose`). Each paired limb joint
+   of the clip turns so its bone points along the character's; the trunk, which
+   the placement is fitted to, does not. The fitted skin carries that pose
+   (`Skin.pose`), and the outputs take it as the skeleton's rest
+   (`mocap_exaggerate.jobs.outputs.at_bind_pose`). A rig resting with every
+   bone along one axis (iClone: legs and arms straight up) otherwise had each
+   leg's map turn the mesh 170 degrees, and blend skinning pinched the hips and
+   shoulders shut as the legs came down.
+4. **Fit each bone** to that pose. Every paired clip joint gets an affine map that takes
    its paired skin joint onto it and the next paired joint down its chain
    onto that joint's place: a turn (the smallest one) and a stretch along the
    bone, the stretch held to 0.5-2 times the overall scale. The mesh follows
@@ -45,7 +53,7 @@ import numpy as np
 
 from ..analysis.limbs import find_limbs, main_child
 from ..core.errors import ConfigError, InputError
-from ..core.rotations import quat_between, quat_to_matrix
+from ..core.rotations import quat_between, quat_identity, quat_inv, quat_mul, quat_rotate, quat_to_matrix
 from ..core.skeleton import Skeleton
 from .skinning import Skin, top_influences
 
@@ -70,11 +78,12 @@ class Binding:
     how: dict[str, str] = field(default_factory=dict)  # clip joint -> "map", "role" or "name"
     scale: float = 1.0
     unpaired_roles: tuple[str, ...] = ()
+    posed: int = 0  # clip joints turned to pose its limbs like the character's (`Skin.pose`)
 
     def summary(self) -> dict:
         counts = {kind: sum(1 for h in self.how.values() if h == kind) for kind in ("map", "role", "name")}
         return {"pairs": len(self.pairs), "by": counts, "scale": round(self.scale, 6),
-                "unpaired_roles": list(self.unpaired_roles)}
+                "unpaired_roles": list(self.unpaired_roles), "posed_joints": self.posed}
 
 
 def _segment_stem(name: str) -> str:
@@ -385,7 +394,7 @@ def _similarity(source: np.ndarray, target: np.ndarray) -> tuple[float, np.ndarr
 
 
 def bind_skin(skin: Skin, clip: Skeleton, joint_map: dict[str, str] | None = None) -> tuple[Skin, Binding | None]:
-    """``skin`` on ``clip``'s joints in its rest pose, and how it was bound (None when it already was).
+    """``skin`` on ``clip``'s joints, posed like it (``Skin.pose``), and how it was bound (None when it already was).
 
     A skin without a bind pose of its own (an ``.npz``) must already be bound
     to the clip's joints in its rest pose; one whose bind pose is the clip's
@@ -407,7 +416,10 @@ def bind_skin(skin: Skin, clip: Skeleton, joint_map: dict[str, str] | None = Non
     bind = np.array([np.asarray(skin.bind[s], dtype=np.float64) for s in binding.pairs.values()])
     scale, rotation, shift = _placement(skin, bind, rest[clip_index], clip_index, roles, chains, height)
     placed = bind @ (scale * rotation).T + shift
-    affine = _bone_maps(clip, rest, clip_index, placed, roles, chains)
+    pose = _limb_pose(clip, rest, clip_index, placed, roles, chains)
+    posed = clip.posed(pose)[0]
+    rest = posed.rest_positions()  # (the trunk is not turned, so the placement on it holds)
+    affine = _bone_maps(posed, rest, clip_index, placed, roles, chains)
 
     # Every skin joint's weight goes to its partner, else its nearest paired ancestor, else the
     # nearest paired joint (or, with no place to go by, the paired joint nearest the clip's root).
@@ -435,8 +447,39 @@ def bind_skin(skin: Skin, clip: Skeleton, joint_map: dict[str, str] | None = Non
     column[used] = np.arange(len(used))
     top_j, top_w = top_influences(rows, column[joints[weighted]], skin.weights[weighted], skin.num_vertices,
                                   skin.joints.shape[1])
-    fitted = Skin(vertices, skin.faces, tuple(clip.names[j] for j in used), top_j, top_w)
-    return fitted, Binding(binding.pairs, binding.how, scale, binding.unpaired_roles)
+    turned = {clip.names[j]: tuple(map(float, pose[j])) for j in range(clip.num_joints) if pose[j, 3] < 1.0}
+    fitted = Skin(vertices, skin.faces, tuple(clip.names[j] for j in used), top_j, top_w, pose=turned)
+    return fitted, Binding(binding.pairs, binding.how, scale, binding.unpaired_roles, len(turned))
+
+
+def _limb_pose(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed: np.ndarray, roles: dict,
+               chains: dict) -> np.ndarray:
+    """Local rotations ``(J, 4)`` posing the clip's limbs like the placed character's.
+
+    Each paired limb joint (not the trunk's: the placement is fitted to it) turns, by the
+    smallest turn, so its bone (`_bones`) points where the character's does; every other
+    joint keeps its parent's orientation. The character is then fitted to that pose, where
+    its bones need no turn, only a stretch: bound to a rest pose with every bone along one
+    axis (iClone, Reallusion CC: legs and arms straight up), each leg's map turned it by
+    170 degrees, and linear blend skinning pinched the hips and shoulders shut as the legs
+    and arms came back down.
+    """
+    source = np.zeros((clip.num_joints, 3))
+    source[clip_index] = placed
+    aims = {j: c for j, c, _, trunk in _bones(clip, rest, clip_index, source, roles, chains)
+            if c is not None and not trunk}
+    world = np.tile(quat_identity(), (clip.num_joints, 1))
+    for j in range(clip.num_joints):
+        above = world[clip.parents[j]] if j else quat_identity()
+        if j in aims:
+            c = aims[j]
+            world[j] = quat_mul(quat_between(quat_rotate(above, rest[c] - rest[j]), source[c] - source[j]), above)
+        else:
+            world[j] = above
+    local = quat_mul(quat_inv(np.concatenate([quat_identity((1,)), world[clip.parents[1:]]])), world)
+    local *= np.where(local[:, 3:] < 0.0, -1.0, 1.0)
+    local[np.all(np.abs(local[:, :3]) <= 1e-12, axis=1)] = quat_identity()
+    return local
 
 
 def _placement(skin: Skin, bind: np.ndarray, rest: np.ndarray, clip_index: np.ndarray, roles: dict, chains: dict,
@@ -462,21 +505,13 @@ def _placement(skin: Skin, bind: np.ndarray, rest: np.ndarray, clip_index: np.nd
     return _similarity(bind[use], rest[use])
 
 
-def _bone_maps(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed: np.ndarray, roles: dict,
-               chains: dict) -> np.ndarray:
-    """One affine map ``(J, 3, 4)`` per clip joint taking the placed skin onto the clip's rest pose.
-
-    A paired joint's map takes its skin joint onto the clip's and turns (the smallest turn) and
-    stretches (along the bone, 0.5-2x) the bone to the next paired joint up the trunk or down the
-    limb onto the clip's. Where a joint branches (hips to spine and thighs, chest to neck and
-    collars), the map is then fitted to every branch by least squares, held near that turn and
-    stretch in the directions the branches do not span, so each branch's start lands where the
-    clip has it and the mesh between them does not tear. A joint with no paired joint below it
-    (a head, a hand) turns as its parent, unstretched.
-    """
+def _bones(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, source: np.ndarray, roles: dict,
+           chains: dict) -> list[tuple[int, int | None, list[int], bool]]:
+    """Each paired joint (in order), the paired joint its bone runs to (None: no usable one), its
+    other paired branches and whether it is in the trunk: up the trunk (past joints that sit on it) for the hips, spine and neck,
+    else the paired child that goes on most straight from the bone coming in (the biggest subtree
+    at the root). ``source (J, 3)`` holds the skin's joints placed at their clip partners."""
     num = clip.num_joints
-    source = np.zeros((num, 3))
-    source[clip_index] = placed
     has_pair = np.zeros(num, bool)
     has_pair[clip_index] = True
     paired_parent = np.full(num, -1)
@@ -490,18 +525,13 @@ def _bone_maps(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed:
     central += chains.get("spine", []) + chains.get("neck", []) + ([roles["head"]] if "head" in roles else [])
     central = [j for j in central if has_pair[j]]
     floor = 1e-2 * clip.height()
-    sizes = np.zeros(num, dtype=np.int64)
-    for j in range(num - 1, 0, -1):
-        sizes[j] += 1
-        sizes[clip.parents[j]] += sizes[j]
+    sizes = clip.subtree_sizes()
 
     def usable(j: int, c: int) -> bool:
         return np.linalg.norm(rest[c] - rest[j]) > floor and np.linalg.norm(source[c] - source[j]) > floor
 
-    linear = np.tile(np.eye(3), (num, 1, 1))
-    turns = np.tile(np.eye(3), (num, 1, 1))
-    fitted = np.zeros(num, bool)
-    for j in map(int, clip_index[np.argsort(clip_index)]):
+    bones = []
+    for j in map(int, np.sort(clip_index)):
         kids = list(below.get(j, []))
         if j in central and central.index(j) + 1 < len(central):
             ahead = central[central.index(j) + 1:]  # up the trunk, past joints that sit on this one
@@ -514,7 +544,31 @@ def _bone_maps(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed:
             else:
                 kids.sort(key=lambda c: -sizes[c])
             primary = next((c for c in kids if usable(j, c)), None)
-            branches = kids
+            branches = [c for c in kids if c != primary and usable(j, c)]
+        bones.append((j, primary, branches if primary is not None else [], j in central))
+    return bones
+
+
+def _bone_maps(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed: np.ndarray, roles: dict,
+               chains: dict) -> np.ndarray:
+    """One affine map ``(J, 3, 4)`` per clip joint taking the placed skin onto the clip's rest pose.
+
+    A paired joint's map takes its skin joint onto the clip's and turns (the smallest turn) and
+    stretches (along the bone, 0.5-2x) the bone to the next paired joint up the trunk or down the
+    limb onto the clip's (`_bones`). Where a joint branches (hips to spine and thighs, chest to neck and
+    collars), the map is then fitted to every branch by least squares, held near that turn and
+    stretch in the directions the branches do not span, so each branch's start lands where the
+    clip has it and the mesh between them does not tear. A joint with no paired joint below it
+    (a head, a hand) turns as its parent, unstretched.
+    """
+    num = clip.num_joints
+    source = np.zeros((num, 3))
+    source[clip_index] = placed
+    linear = np.tile(np.eye(3), (num, 1, 1))
+    turns = np.tile(np.eye(3), (num, 1, 1))
+    fitted = np.zeros(num, bool)
+    bones = _bones(clip, rest, clip_index, source, roles, chains)
+    for j, primary, others, _ in bones:
         if primary is None:
             continue
         there, here = rest[primary] - rest[j], source[primary] - source[j]
@@ -523,7 +577,6 @@ def _bone_maps(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed:
         turns[j] = quat_to_matrix(quat_between(here, there))
         linear[j] = turns[j] @ (np.eye(3) + (stretch - 1.0) * np.outer(axis, axis))
         fitted[j] = True
-        others = [c for c in branches if c != primary and usable(j, c)]
         if others:
             ends = [primary] + others
             h = source[ends] - source[j]
@@ -533,9 +586,13 @@ def _bone_maps(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed:
             spread = np.linalg.svd(solved, compute_uv=False)
             if spread.max() <= AXIAL_LIMIT * 1.25 and spread.min() >= 1 / (AXIAL_LIMIT * 1.25) and np.linalg.det(solved) > 0:
                 linear[j] = solved
-    for j in map(int, np.sort(clip_index)):
+    has_pair = np.zeros(num, bool)
+    has_pair[clip_index] = True
+    for j, *_ in bones:
         if not fitted[j]:
-            p = paired_parent[j]
+            p = int(clip.parents[j])
+            while p >= 0 and not has_pair[p]:
+                p = int(clip.parents[p])
             turns[j] = turns[p] if p >= 0 else np.eye(3)
             linear[j] = turns[j]
     # y -> rest[j] + linear[j] @ (y - source[j]) as a 3x4 matrix

@@ -46,6 +46,10 @@ class Skin:
         body's tubes, each weighted to the joint its link starts at), not painted for
         rigid bones: on the rubber skeleton a branch joint's weight then follows the
         child link its vertex lies along (`reweight`)
+    pose : joint name -> (4,) local rotation: the mesh is bound to the skeleton posed by
+        these (the character's own pose, `mocap_exaggerate.rig.binding.bind_skin`), not to
+        its rest pose; the outputs then take that pose as the skeleton's rest
+        (`mocap_exaggerate.core.motion.Motion.with_rest`). Empty: bound in the rest pose.
     """
 
     vertices: np.ndarray
@@ -56,6 +60,7 @@ class Skin:
     bind: dict = field(default_factory=dict)
     parents: dict = field(default_factory=dict)
     per_link: bool = False
+    pose: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         v = np.asarray(self.vertices, dtype=np.float64)

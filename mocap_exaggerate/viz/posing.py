@@ -13,7 +13,7 @@ import numpy as np
 
 from ..core.motion import Motion
 from ..core.rotations import vector_norm
-from ..jobs.outputs import base_skin, output_skin, output_thickness
+from ..jobs.outputs import at_bind_pose, base_skin, output_skin, output_thickness
 from ..pipeline import PipelineResult
 from ..rig.skinning import Skin, pose_skin
 from .framing import view_axes
@@ -110,6 +110,7 @@ def pose_captured(motion: Motion, result: PipelineResult, frames: np.ndarray, bo
                   dtype=np.float64) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
     """The captured body ``body`` (bound to the clip, `base_skin`) at the output ``frames``: its vertices
     ``(F, V, 3)``, the captured root ``(F, 3)`` and the view's axes (`view_axes`)."""
+    motion, _, body = at_bind_pose(motion, None, body)
     skeleton = motion.skeleton
     captured_rot, captured_pos = motion.forward_kinematics()
     if result.rest_frames_dropped:  # the output starts where the motion does: line the frames up
@@ -124,6 +125,7 @@ def pose_exaggerated(motion: Motion, result: PipelineResult, frames: np.ndarray,
                      dtype=np.float64) -> tuple[np.ndarray, Skin]:
     """The run's body at the output ``frames``: ``body`` re-weighted onto the output skeleton and posed
     as the GLB poses it; its vertices ``(F, V', 3)`` and the re-weighted skin."""
+    motion, result, body = at_bind_pose(motion, result, body)
     rubber = output_skin(motion, result, body)
     out_skeleton = result.motion.skeleton
     index_out = np.array([out_skeleton.index(n) for n in rubber.joint_names], dtype=np.int64)
