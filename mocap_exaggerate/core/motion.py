@@ -110,7 +110,8 @@ class Motion:
         skeleton's rest is the pose a DCC shows. Where a rig's rest pose is a
         stick with every bone along one axis (iClone, Reallusion CC), a mesh
         bound to it collapses where the limbs turn back down; posed like the
-        mesh, it does not (`mocap_exaggerate.rig.binding.bind_pose`).
+        mesh, it does not (`mocap_exaggerate.rig.binding.bind_skin`,
+        `mocap_exaggerate.jobs.outputs.at_bind_pose`).
         """
         skeleton = self.skeleton
         rested, world = skeleton.posed(pose)

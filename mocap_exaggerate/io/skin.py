@@ -27,7 +27,9 @@ __all__ = ["load_skin", "check_skin", "load_npz_skin", "load_gltf_skin", "load_m
 
 def load_npz_skin(path: str | os.PathLike) -> Skin:
     """A skin from ``.npz``: vertices, faces, joint_names, and either joints + weights
-    ``(V, K)`` or dense weights ``(V, J)``."""
+    ``(V, K)`` or dense weights ``(V, J)``; and ``rest_pose (J, 4)`` (x, y, z, w local rotations)
+    where the mesh is bound to the joints posed by it, not in their rest pose (`Skin.pose`:
+    what the weights file of a character bound in its own pose holds)."""
     label = str(path)
     try:
         regular_file(path, what=".npz skin", label=label)
@@ -55,8 +57,18 @@ def load_npz_skin(path: str | os.PathLike) -> Skin:
             raise InputError(f"dense weights must be (V, {len(names)}), got {weights.shape}", source=label)
         rows, cols = np.nonzero(weights)
         joints, weights = top_influences(rows, cols, weights[rows, cols], len(weights), 4)
+    pose = {}
+    if "rest_pose" in data:
+        turns = np.asarray(data["rest_pose"])
+        if turns.shape != (len(names), 4) or turns.dtype.kind != "f" or not np.all(np.isfinite(turns)):
+            raise InputError(f"rest_pose must be ({len(names)}, 4) finite quaternions (x, y, z, w), one a joint, "
+                             f"got {turns.dtype} {turns.shape}", source=label)
+        if np.abs(np.linalg.norm(turns, axis=1) - 1.0).max() > 1e-4:
+            raise InputError("rest_pose holds a quaternion that is not of unit length", source=label)
+        turns = turns / np.linalg.norm(turns, axis=1, keepdims=True)
+        pose = {names[k]: tuple(map(float, turns[k])) for k in range(len(names)) if abs(turns[k, 3]) < 1.0}
     try:
-        return Skin(data["vertices"], data["faces"], names, joints, weights)
+        return Skin(data["vertices"], data["faces"], names, joints, weights, pose=pose)
     except ValueError as error:
         raise InputError(str(error), source=label) from None
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from .. import __version__
 from ..config import PipelineConfig
-from ..core.errors import ConfigError
+from ..core.errors import ConfigError, printable
 from ..core.kinematics import cache_blocks
 from ..core.motion import Motion
 from ..core.rotations import quat_identity, vector_norm
@@ -143,7 +143,8 @@ THICKNESS = (0.5, 2.0)
 
 def base_skin(motion: Motion, result: PipelineResult, skin: Skin | None = None,
               joint_map: dict[str, str] | None = None) -> Skin:
-    """The skin on the clip's own joints in its rest pose: ``skin`` bound to the clip
+    """The skin on the clip's own joints (in its rest pose, or posed like the character: `Skin.pose`,
+    taken up by `at_bind_pose`): ``skin`` bound to the clip
     (`mocap_exaggerate.rig.binding.bind_skin`, with ``joint_map`` for the pairs it misses; as it is
     when it already is), or the default body."""
     skeleton = motion.skeleton
@@ -173,6 +174,9 @@ def at_bind_pose(motion: Motion, result: PipelineResult | None, skin: Skin
         return motion, result, skin
     pose = np.tile(quat_identity(), (motion.skeleton.num_joints, 1))
     for name, turn in skin.pose.items():
+        if name not in motion.skeleton.names:
+            raise ConfigError(f"the skin is bound in a pose that turns '{printable(name[:80])}', which is not a joint "
+                              "of the clip")
         pose[motion.skeleton.index(name)] = turn
     posed = motion.with_rest(pose)
     if result is not None:
@@ -248,7 +252,9 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
     from ..io.skin import npz_bytes
 
     scale, how = unit_scale(units, motion.skeleton.height())
-    motion, result, based = at_bind_pose(motion, result, base_skin(motion, result, skin, joint_map))
+    based = base_skin(motion, result, skin, joint_map)
+    pose = based.pose
+    motion, result, based = at_bind_pose(motion, result, based)
     bound = output_skin(motion, result, based, influences)
     from ..analysis.limbs import standing_up
 
@@ -256,8 +262,11 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
     up = standing_up(motion.skeleton, motion.slice(slice(None, None, step)).world_positions())
     thickness = output_thickness(result)
     glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=thickness, up=up)
+    posed = {}
+    if pose:  # the mesh is in the GLB's rest pose, the BVH's posed so: how, for the .npz read back as a skin
+        posed["rest_pose"] = np.array([pose.get(name, (0.0, 0.0, 0.0, 1.0)) for name in bound.joint_names])
     weights = npz_bytes(joint_names=np.array(bound.joint_names), joints=bound.joints, weights=bound.weights,
-                        vertices=bound.vertices, faces=bound.faces)
+                        vertices=bound.vertices, faces=bound.faces, **posed)
     scene = None
     if usd:
         from ..io.usd import format_usd

@@ -17,7 +17,8 @@ the character's, which is what the rest of the tool takes:
    fitted to the paired trunk joints (Umeyama 1991), which differ little
    between an A-pose and a T-pose. This carries Y-up decimetres onto Z-up
    inches, and the character's front onto the clip's.
-3. **Pose the clip like the character** (`_limb_pose`). Each paired limb joint
+3. **Pose the clip like the character** (`_limb_pose`), where a limb of its rest
+   points more than `POSE_TURN` from the character's. Each paired limb joint
    of the clip turns so its bone points along the character's; the trunk, which
    the placement is fitted to, does not. The fitted skin carries that pose
    (`Skin.pose`), and the outputs take it as the skeleton's rest
@@ -68,6 +69,7 @@ _UNPAIRED = ("left_hip", "right_hip")
 _SEGMENT = re.compile(r"\d+")
 _SUBJOINT = re.compile(r"^(.*)_s\d+$")
 AXIAL_LIMIT = 2.0  # a bone stretches or shrinks at most this much beyond the overall scale
+POSE_TURN = 90.0  # degrees: a clip's limb bone pointing farther than this from the character's is posed to it
 
 
 @dataclass(frozen=True)
@@ -454,28 +456,36 @@ def bind_skin(skin: Skin, clip: Skeleton, joint_map: dict[str, str] | None = Non
 
 def _limb_pose(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed: np.ndarray, roles: dict,
                chains: dict) -> np.ndarray:
-    """Local rotations ``(J, 4)`` posing the clip's limbs like the placed character's.
+    """Local rotations ``(J, 4)`` posing the clip's limbs like the placed character's, where they
+    point another way.
 
-    Each paired limb joint (not the trunk's: the placement is fitted to it) turns, by the
-    smallest turn, so its bone (`_bones`) points where the character's does; every other
-    joint keeps its parent's orientation. The character is then fitted to that pose, where
-    its bones need no turn, only a stretch: bound to a rest pose with every bone along one
-    axis (iClone, Reallusion CC: legs and arms straight up), each leg's map turned it by
+    Where a limb bone of the clip's rest (`_bones`) points more than `POSE_TURN` away from the
+    character's, each paired limb joint (not the trunk's: the placement is fitted to it)
+    turns, by the smallest turn, to point its bone where the character's does; every other
+    joint keeps its orientation in its parent. The character is then fitted to that pose,
+    where its bones need no turn, only a stretch: bound to a rest pose with every bone along
+    one axis (iClone, Reallusion CC: legs and arms straight up), each leg's map turned it by
     170 degrees, and linear blend skinning pinched the hips and shoulders shut as the legs
-    and arms came back down.
+    and arms came back down. A rig whose limbs are all nearer (a T-pose rig and an A-pose
+    character: 45-70 degrees at the arms) is fitted as it rests (the identity pose): posed,
+    its mesh tore a little less on some rigs and a little more on others (`bench/binding.py`),
+    and its GLB's rest would no longer be the clip's.
     """
     source = np.zeros((clip.num_joints, 3))
     source[clip_index] = placed
     aims = {j: c for j, c, _, trunk in _bones(clip, rest, clip_index, source, roles, chains)
             if c is not None and not trunk}
     world = np.tile(quat_identity(), (clip.num_joints, 1))
+    apart = [np.dot(rest[c] - rest[j], source[c] - source[j])
+             / (np.linalg.norm(rest[c] - rest[j]) * np.linalg.norm(source[c] - source[j])) for j, c in aims.items()]
+    if not apart or min(apart) >= np.cos(np.radians(POSE_TURN)):
+        return world  # every limb within POSE_TURN of the character's: fitted as it rests
     for j in range(clip.num_joints):
         above = world[clip.parents[j]] if j else quat_identity()
+        world[j] = above
         if j in aims:
             c = aims[j]
             world[j] = quat_mul(quat_between(quat_rotate(above, rest[c] - rest[j]), source[c] - source[j]), above)
-        else:
-            world[j] = above
     local = quat_mul(quat_inv(np.concatenate([quat_identity((1,)), world[clip.parents[1:]]])), world)
     local *= np.where(local[:, 3:] < 0.0, -1.0, 1.0)
     local[np.all(np.abs(local[:, :3]) <= 1e-12, axis=1)] = quat_identity()
@@ -544,8 +554,9 @@ def _bones(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, source: np.
             else:
                 kids.sort(key=lambda c: -sizes[c])
             primary = next((c for c in kids if usable(j, c)), None)
-            branches = [c for c in kids if c != primary and usable(j, c)]
-        bones.append((j, primary, branches if primary is not None else [], j in central))
+            branches = kids
+        others = [c for c in branches if c != primary and usable(j, c)] if primary is not None else []
+        bones.append((j, primary, others, j in central))
     return bones
 
 
