@@ -1,8 +1,9 @@
-"""The one compiled piece: BVH number formatting (``mocap_exaggerate/io/_formatting.c``).
+"""The compiled pieces: BVH number formatting (``mocap_exaggerate/io/_formatting.c``) and two
+quaternion loops (``mocap_exaggerate/core/_kernels.c``: world to local, frames along rubber links).
 
-Optional: where no C compiler is found the install goes on, and the writer uses its NumPy
-formatter, which writes the same bytes (tests/test_bvh.py checks both). Everything else is
-declared in pyproject.toml.
+Optional: where no C compiler is found the install goes on, and the library uses its NumPy
+code, which gives the same bytes (tests/test_bvh.py and tests/test_rubber_frames.py check both).
+Everything else is declared in pyproject.toml.
 """
 
 from setuptools import Extension, setup
@@ -15,6 +16,12 @@ setup(
             # No fused multiply-add or fast-math: the rounding is NumPy's, bit for bit.
             extra_compile_args=["-O2", "-ffp-contract=off"],
             optional=True,
-        )
+        ),
+        Extension(
+            "mocap_exaggerate.core._kernels",
+            ["mocap_exaggerate/core/_kernels.c"],
+            extra_compile_args=["-O2", "-ffp-contract=off"],  # NumPy's rounding, bit for bit
+            optional=True,
+        ),
     ]
 )

@@ -264,3 +264,74 @@ def test_a_limbs_sub_links_stretch_evenly_after_the_springs_and_contacts(name):
         sub_links = np.linalg.norm(np.diff(positions[:, chain], axis=1), axis=2)
         spread = (sub_links.max(axis=1) / sub_links.mean(axis=1)).max()
         assert spread < 1.08, (motion.skeleton.names[child], spread)
+
+
+def _orient_inputs(path, preset: str):
+    """What the orient stage hands `curve_frames` on a clip: the original joints' orientations, the
+    rubber skeleton's positions and its hierarchy (caught from a real run)."""
+    from mocap_exaggerate.config import load_preset
+    from mocap_exaggerate.stages import orient
+
+    caught = {}
+    real = orient.curve_frames
+
+    def catch(world, positions, hierarchy, **options):
+        caught["inputs"] = (world.copy(), positions.copy(), hierarchy)
+        return real(world, positions, hierarchy, **options)
+
+    orient.curve_frames = catch
+    try:
+        run(read_bvh(path)[0], load_preset(preset))
+    finally:
+        orient.curve_frames = real
+    return caught["inputs"]
+
+
+@pytest.mark.parametrize("preset", ["subtle", "looney"])
+@pytest.mark.parametrize("path", all_clip_params())
+def test_the_compiled_kernels_give_numpys_bits(path, preset):
+    """core/_kernels.c (world to local; the frames carried along the rubber links) against the NumPy
+    code it replaces, on every clip: the same bits, so an install without a C compiler writes the same
+    bytes. (Built without fused multiply-add, each operation in NumPy's order.)"""
+    from mocap_exaggerate.core import kinematics
+    from mocap_exaggerate.stages.orient import curve_frames
+
+    if kinematics._kernels is None:
+        pytest.skip("core/_kernels.c was not built (no C compiler at install); the NumPy code is what runs")
+    world, positions, hierarchy = _orient_inputs(path, preset)
+    fast = curve_frames(world.copy(), positions, hierarchy)
+    slow = curve_frames(world.copy(), positions, hierarchy, compiled=False)
+    assert np.array_equal(fast, slow)
+    parents = hierarchy.skeleton.parents if len(positions[0]) == hierarchy.skeleton.num_joints else None
+    parents = link_starts(hierarchy).skeleton.parents if parents is None else parents
+    ours = kinematics.local_from_world(parents, fast, positions)
+    theirs = kinematics.local_from_world(parents, fast, positions, compiled=False)
+    assert np.array_equal(ours[0], theirs[0]) and np.array_equal(ours[1], theirs[1])
+    overwritten = fast.copy()
+    assert np.array_equal(kinematics.local_from_world(parents, overwritten, positions, overwrite_rotations=True)[0],
+                          theirs[0])
+
+
+def test_the_compiled_kernels_are_built_where_ci_runs_and_refuse_what_they_cannot_read():
+    """.ci/run installs on a machine with a C compiler: the kernels must be there. They check every
+    buffer and index they are given (a ValueError, never a read outside an array)."""
+    from mocap_exaggerate.core import kinematics
+
+    assert kinematics._kernels is not None, "core/_kernels.c was not built: pip install -e . (setup.py builds it)"
+    kernels = kinematics._kernels
+    parents = np.array([-1, 0, 1])
+    rot, pos = np.tile([0.0, 0, 0, 1], (2, 3, 1)), np.zeros((2, 3, 3))
+    with pytest.raises(ValueError, match="parents"):
+        kernels.local_from_world(np.array([-1, 2, 1]), rot, pos, rot.copy(), pos.copy(), 2, 3)
+    with pytest.raises(ValueError, match="world_pos"):
+        kernels.local_from_world(parents, rot, pos[:1], rot.copy(), pos.copy(), 2, 3)
+    with pytest.raises(ValueError, match="world_rot"):
+        kernels.local_from_world(parents, rot.astype(np.float32), pos, rot.copy(), pos.copy(), 2, 3)
+    with pytest.raises(ValueError, match="outside"):
+        kernels.chain_frames(rot.copy(), pos, np.array([0]), np.array([1]), np.array([2]), np.zeros((1, 3)), 2, 3, 1)
+    with pytest.raises(ValueError, match="contiguous"):  # (NumPy's own refusal to lend a strided view)
+        kernels.chain_frames(rot[:, ::2], pos, np.array([0]), np.array([1]), np.array([1]), np.zeros((1, 3)), 2, 3, 1)
+    with pytest.raises(ValueError, match="read-only"):  # an output NumPy will not lend for writing
+        frozen = rot.copy()
+        frozen.setflags(write=False)
+        kernels.chain_frames(frozen, pos, np.array([0]), np.array([1]), np.array([1]), np.zeros((1, 3)), 2, 3, 1)
