@@ -1,5 +1,6 @@
-"""The compiled pieces: BVH number formatting (``mocap_exaggerate/io/_formatting.c``) and two
-quaternion loops (``mocap_exaggerate/core/_kernels.c``: world to local, frames along rubber links).
+"""The compiled pieces: BVH number formatting (``mocap_exaggerate/io/_formatting.c``) and three
+quaternion loops (``mocap_exaggerate/core/_kernels.c``: forward kinematics, world to local,
+frames along rubber links).
 
 Optional: where no C compiler is found the install goes on, and the library uses its NumPy
 code, which gives the same bytes (tests/test_bvh.py and tests/test_rubber_frames.py check both).

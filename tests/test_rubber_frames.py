@@ -290,7 +290,7 @@ def _orient_inputs(path, preset: str):
 @pytest.mark.parametrize("preset", ["subtle", "looney"])
 @pytest.mark.parametrize("path", all_clip_params())
 def test_the_compiled_kernels_give_numpys_bits(path, preset):
-    """core/_kernels.c (world to local; the frames carried along the rubber links) against the NumPy
+    """core/_kernels.c (forward kinematics, world to local, the frames carried along the rubber links) against the NumPy
     code it replaces, on every clip: the same bits, so an install without a C compiler writes the same
     bytes. (Built without fused multiply-add, each operation in NumPy's order.)"""
     from mocap_exaggerate.core import kinematics
@@ -310,6 +310,10 @@ def test_the_compiled_kernels_give_numpys_bits(path, preset):
     overwritten = fast.copy()
     assert np.array_equal(kinematics.local_from_world(parents, overwritten, positions, overwrite_rotations=True)[0],
                           theirs[0])
+    world = kinematics.forward_kinematics(parents, *ours)
+    again = kinematics.forward_kinematics(parents, *ours, compiled=False)
+    assert np.array_equal(world[0], again[0]) and np.array_equal(world[1], again[1])
+    assert np.array_equal(kinematics.forward_kinematics(parents, ours[0][:1], ours[1][:1])[1], again[1][:1])
 
 
 def test_the_compiled_kernels_are_built_where_ci_runs_and_refuse_what_they_cannot_read():
@@ -327,6 +331,10 @@ def test_the_compiled_kernels_are_built_where_ci_runs_and_refuse_what_they_canno
         kernels.local_from_world(parents, rot, pos[:1], rot.copy(), pos.copy(), 2, 3)
     with pytest.raises(ValueError, match="world_rot"):
         kernels.local_from_world(parents, rot.astype(np.float32), pos, rot.copy(), pos.copy(), 2, 3)
+    with pytest.raises(ValueError, match="must not be the local"):
+        kernels.forward_kinematics(parents, rot, pos, rot, pos.copy(), 2, 3)
+    with pytest.raises(ValueError, match="parents"):
+        kernels.forward_kinematics(np.array([0, 0, 1]), rot, pos, rot.copy(), pos.copy(), 2, 3)
     with pytest.raises(ValueError, match="outside"):
         kernels.chain_frames(rot.copy(), pos, np.array([0]), np.array([1]), np.array([2]), np.zeros((1, 3)), 2, 3, 1)
     with pytest.raises(ValueError, match="contiguous"):  # (NumPy's own refusal to lend a strided view)

