@@ -506,8 +506,10 @@ def test_the_glb_and_the_weights_of_a_body_bound_in_its_own_pose_reproduce_the_r
 
 
 @pytest.mark.parametrize("pose, why", [
-    (np.zeros((3, 4)), "must be"),
-    (np.full((2, 4), np.nan), "must be"),
+    (np.zeros((3, 4)), "3 rows and joint_names names 2"),
+    (np.zeros((2, 3)), "must be"),
+    (np.full((2, 4), np.nan), "not finite"),
+    (np.array([[0.0, 0, 0, np.inf], [0, 0, 0, 1]]), "not finite"),
     (np.array([[0.0, 0, 0, 2], [0, 0, 0, 1]]), "unit length"),
     (np.array([["a", "b", "c", "d"]] * 2), "must be"),
 ])
@@ -525,3 +527,43 @@ def test_a_weights_file_with_a_bad_rest_pose_is_refused_in_one_line(tmp_path, po
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
     assert len(done.stderr.strip().splitlines()) == 1 and why in done.stderr
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_a_weights_file_made_for_another_skeleton_is_refused_naming_the_file(tmp_path):
+    """A run's weights .npz fits the BVH it wrote; on another clip its joints (or the pose it is bound
+    in) name joints that clip does not have: one line naming the file and the joints, exit 2, nothing
+    written (it was a ConfigError from the re-weighting that named neither)."""
+    from mocap_exaggerate.io.skin import npz_bytes
+
+    path = tmp_path / "other rig.weights.npz"
+    path.write_bytes(npz_bytes(vertices=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]),
+                               joint_names=np.array(["hip", "abdomen_s0"]), joints=np.zeros((3, 1), int),
+                               weights=np.ones((3, 1)), rest_pose=np.array([[0.0, 0, 0, 1], [0, 0.6, 0, 0.8]])))
+    clip = SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh"
+    done = subprocess.run(CLI + ["exaggerate", str(clip), "-o", str(tmp_path / "out"), "--skin", str(path)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    line = done.stderr.strip()
+    assert len(line.splitlines()) == 1 and str(path) in line and "'abdomen_s0'" in line, line
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+ROBOT = SHARED_BVH.parent / "gltf" / "robot_expressive_quaternius.glb"
+
+
+@pytest.mark.skipif(not ROBOT.exists(), reason=f"the Quaternius robot is not at {ROBOT} (../shared/data/gltf)")
+@pytest.mark.parametrize("command", [["preview", "-o", "{out}/look.png"],
+                                     ["compare", "--omega", "2,3", "-o", "{out}/grid.png"]])
+def test_the_pictures_say_what_the_binding_left_unpaired_as_exaggerate_does(tmp_path, command):
+    """`preview --skin` is where a user looks before rendering (the guide says so), yet it said only
+    'wrote ...' where `exaggerate` warned that the robot's legs pair with no joint of the clip (found by a
+    new-user trial); `-q` keeps it quiet."""
+    clip = SAMPLE_DIR / "cmu_09_01_run_daz.bvh"
+    args = [a.format(out=tmp_path) for a in command]
+    done = subprocess.run(CLI + [args[0], str(clip), *args[1:], "--skin", str(ROBOT)], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "no joint of the character pairs with the clip's left_thigh" in done.stderr
+    quiet = subprocess.run(CLI + ["-q", args[0], str(clip), *args[1:], "--skin", str(ROBOT), "--overwrite"],
+                           capture_output=True, text=True, timeout=300)
+    assert quiet.returncode == 0 and quiet.stderr == "", quiet.stderr

@@ -60,10 +60,15 @@ def load_npz_skin(path: str | os.PathLike) -> Skin:
     pose = {}
     if "rest_pose" in data:
         turns = np.asarray(data["rest_pose"])
-        if turns.shape != (len(names), 4) or turns.dtype.kind != "f" or not np.all(np.isfinite(turns)):
-            raise InputError(f"rest_pose must be ({len(names)}, 4) finite quaternions (x, y, z, w), one a joint, "
-                             f"got {turns.dtype} {turns.shape}", source=label)
-        if np.abs(np.linalg.norm(turns, axis=1) - 1.0).max() > 1e-4:
+        if turns.dtype.kind != "f" or turns.ndim != 2 or turns.shape[1:] != (4,):
+            raise InputError(f"rest_pose must be (J, 4) float quaternions (x, y, z, w), one a joint, got "
+                             f"{turns.dtype} {turns.shape}", source=label)
+        if len(turns) != len(names):
+            raise InputError(f"rest_pose has {len(turns)} rows and joint_names names {len(names)} joints: one "
+                             "quaternion a joint", source=label)
+        if not np.all(np.isfinite(turns)):
+            raise InputError("rest_pose holds a value that is not finite (NaN or infinite)", source=label)
+        if len(turns) and np.abs(np.linalg.norm(turns, axis=1) - 1.0).max() > 1e-4:
             raise InputError("rest_pose holds a quaternion that is not of unit length", source=label)
         turns = turns / np.linalg.norm(turns, axis=1, keepdims=True)
         pose = {names[k]: tuple(map(float, turns[k])) for k in range(len(names)) if abs(turns[k, 3]) < 1.0}

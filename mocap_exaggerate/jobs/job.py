@@ -350,10 +350,7 @@ def convert(
         unlikely = guessed_units_warning(glb_units, motion.skeleton.height())
         warnings += [unlikely] if unlikely else []
     skin, binding = character.bound_to(motion, label) if glb else (None, None)  # a skin that will not bind costs nothing
-    if binding is not None and binding.unpaired_roles:  # (said only in the manifest, the robot's legs hung still)
-        warnings.append(f"skin: no joint of the character pairs with the clip's {', '.join(binding.unpaired_roles)}: "
-                        "those parts of it move with the nearest joint paired, not as the clip does; name the "
-                        "pairs in a --joint-map file ('clip joint = skin joint' a line)")
+    warnings += binding_warnings(binding)  # (said only in the manifest, the robot's legs hung still)
     input_hash = digest_of(data)
     del data  # the input's bytes are not needed past this point; a long clip's are tens of MB, at the pipeline's peak
     result = run(motion, config, paths=paths)
@@ -496,6 +493,16 @@ class Character:
     def unnamed(self, to_stream: bool) -> list[str]:
         """Notes for what the pipeline file cannot name: a skin or joint map given as objects."""
         return _unnamed(self.skin, self.skin_file, self.joint_map, self.map_file, to_stream)
+
+
+def binding_warnings(binding) -> list[str]:
+    """What a user must hear of how a character was bound (`mocap_exaggerate.rig.binding.Binding`, or None):
+    the clip's main parts no joint of the character pairs with."""
+    if binding is None or not binding.unpaired_roles:
+        return []
+    return [f"skin: no joint of the character pairs with the clip's {', '.join(binding.unpaired_roles)}: those parts "
+            "of it move with the nearest joint paired, not as the clip does; name the pairs in a --joint-map file "
+            "('clip joint = skin joint' a line)"]
 
 
 def recorded_config(config: PipelineConfig, folder: str | os.PathLike, *, glb: bool, units: str, influences: int,

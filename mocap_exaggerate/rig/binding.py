@@ -403,6 +403,13 @@ def bind_skin(skin: Skin, clip: Skeleton, joint_map: dict[str, str] | None = Non
     rest pose is taken as it is. Any other is fitted (module notes).
     """
     if not needs_binding(skin, clip, joint_map):
+        missing = [n for n in (*skin.joint_names, *skin.pose) if n not in clip.names]
+        if missing:  # (said here, where the caller names the file, not deep in the re-weighting)
+            shown = ", ".join(_shown(n) for n in dict.fromkeys(missing[:5]))
+            raise ConfigError(f"names joints the clip does not have ({shown}{', ...' if len(missing) > 5 else ''}): a "
+                              "skin with no bind pose of its own (an .npz) must be made for this clip's skeleton, as "
+                              "a run's weights file is for the BVH it wrote; bring a GLB or MakeHuman character to "
+                              "bind to another")
         return skin, None
     roles, chains = joint_roles(clip)
     binding = pair_joints(clip, skin, joint_map, (roles, chains))

@@ -10,6 +10,7 @@ shows is chosen in `framing`.
 from __future__ import annotations
 
 import difflib
+import logging
 import os
 import shutil
 from pathlib import Path
@@ -26,6 +27,8 @@ from .stills import render_preview, render_trajectory
 __all__ = ["write_preview", "clip_and_character", "joint_named", "PREVIEW_SUFFIXES"]
 
 PREVIEW_SUFFIXES = (".png", ".gif", ".mp4", ".html")
+
+log = logging.getLogger("mocap_exaggerate")
 
 
 def joint_named(skeleton: Skeleton, name: str, where: str = "the clip") -> int:
@@ -44,9 +47,11 @@ def clip_and_character(source, targets: dict, config, *, skin=None, joint_map=No
     """What a picture of a clip starts from: the clip read (``config.input``), the body drawn bound to it
     (the GLB's: ``config.glb``'s character with ``skin`` and ``joint_map`` over it, a glTF clip's own mesh
     where none is named) and how to name the clip in messages; the ``targets`` (kind -> path) checked first
-    (never an input; taken only with ``overwrite``), as a job's."""
+    (never an input; taken only with ``overwrite``), as a job's. What the reading and the binding warn of
+    (a frame count the file contradicts, parts of the clip no joint of the character pairs with) is logged
+    as warnings, as ``exaggerate`` says them."""
     from ..io.gltf_motion import is_gltf
-    from ..jobs.job import Character, check_targets, read_clip
+    from ..jobs.job import Character, binding_warnings, check_targets, read_clip
 
     if is_gltf(source) and skin is None and not config.glb.skin:
         skin = Path(source)  # a game character is drawn with its own mesh, as exaggerate writes it
@@ -54,9 +59,11 @@ def clip_and_character(source, targets: dict, config, *, skin=None, joint_map=No
     inputs = [Path(p) for p in (source, character.skin_file, character.map_file)
               if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
     check_targets(targets, inputs, overwrite)
-    motion, _ = read_clip(source, config.input, name=label)
+    motion, report = read_clip(source, config.input, name=label)
     where = label or (str(source) if inputs else "the clip")
-    body, _ = character.bound_to(motion, where)
+    body, binding = character.bound_to(motion, where)
+    for warning in [*report.warnings, *binding_warnings(binding)]:
+        log.warning("%s: %s", where, warning)
     return motion, body, where
 
 
