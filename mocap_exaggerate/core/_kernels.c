@@ -11,8 +11,9 @@
  *     parents (J,) int64 with parents[0] = -1 and parents[j] < j; world_rot (F, J, 4), world_pos (F, J, 3);
  *     local_rot (F, J, 4) may be world_rot itself (each frame's joints are done last to first, so a
  *     parent is read before it is written); local_pos (F, J, 3). All C-contiguous float64.
- * forward_kinematics(parents, local_rot, local_pos, world_rot, world_pos)
- *     the same shapes; the world arrays are written, and are not the local ones.
+ * forward_kinematics(parents, rot, pos)
+ *     rot (J, F, 4) and pos (J, F, 3): the local transforms, joint-major (a joint's frames contiguous, as
+ *     core/kinematics.py lays them out), turned into world ones in place.
  * chain_frames(out, positions, heads, starts, cuts, direction)
  *     out (F, J, 4) float64, read at the heads and written at starts[l] + k for k < cuts[l];
  *     positions (F, J, 3); heads, starts, cuts (L,) int64; direction (L, 3) float64.
@@ -171,24 +172,21 @@ static PyObject *local_from_world(PyObject *self, PyObject *args) {
 }
 
 static PyObject *forward_kinematics(PyObject *self, PyObject *args) {
-    PyObject *objects[5];
+    PyObject *objects[3];
     Py_ssize_t frames, joints;
-    if (!PyArg_ParseTuple(args, "OOOOOnn", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4], &frames,
-                          &joints))
-        return NULL;
+    if (!PyArg_ParseTuple(args, "OOOnn", &objects[0], &objects[1], &objects[2], &frames, &joints)) return NULL;
     if (frames < 0 || joints < 1 || frames > PY_SSIZE_T_MAX / 4 / joints) {
         PyErr_SetString(PyExc_ValueError, "forward_kinematics: bad frame or joint count");
         return NULL;
     }
-    Py_buffer views[5];
-    const char *formats[5] = {"q", "d", "d", "d", "d"};
-    const Py_ssize_t counts[5] = {joints, frames * joints * 4, frames * joints * 3, frames * joints * 4,
-                                  frames * joints * 3};
-    const char *names[5] = {"parents", "local_rot", "local_pos", "world_rot", "world_pos"};
+    Py_buffer views[3];
+    const char *formats[3] = {"q", "d", "d"};
+    const Py_ssize_t counts[3] = {joints, joints * frames * 4, joints * frames * 3};
+    const char *names[3] = {"parents", "rot", "pos"};
     int got = 0;
-    for (; got < 5; got++)
-        if (get_array(objects[got], &views[got], formats[got], counts[got], got >= 3, names[got]) < 0) break;
-    int bad = got < 5;
+    for (; got < 3; got++)
+        if (get_array(objects[got], &views[got], formats[got], counts[got], got >= 1, names[got]) < 0) break;
+    int bad = got < 3;
     const int64_t *parents = bad ? NULL : (const int64_t *)views[0].buf;
     if (!bad) {
         bad = parents[0] != -1;
@@ -196,29 +194,21 @@ static PyObject *forward_kinematics(PyObject *self, PyObject *args) {
         if (bad)
             PyErr_SetString(PyExc_ValueError, "forward_kinematics: parents must start at -1, each before its child");
     }
-    if (!bad && (views[3].buf == views[1].buf || views[4].buf == views[2].buf)) {
-        bad = 1;
-        PyErr_SetString(PyExc_ValueError, "forward_kinematics: the world arrays must not be the local ones");
-    }
     if (!bad) {
-        const double *local_rot = (const double *)views[1].buf;
-        const double *local_pos = (const double *)views[2].buf;
-        double *world_rot = (double *)views[3].buf;
-        double *world_pos = (double *)views[4].buf;
+        double *rot = (double *)views[1].buf;
+        double *pos = (double *)views[2].buf;
         Py_BEGIN_ALLOW_THREADS
-        for (Py_ssize_t f = 0; f < frames; f++) {
-            const double *lrot = local_rot + f * joints * 4, *lpos = local_pos + f * joints * 3;
-            double *rot = world_rot + f * joints * 4, *pos = world_pos + f * joints * 3;
-            memcpy(rot, lrot, 4 * sizeof(double));
-            memcpy(pos, lpos, 3 * sizeof(double));
-            for (Py_ssize_t j = 1; j < joints; j++) { /* first to last: a parent is done before its children */
-                const double *parent = rot + parents[j] * 4, *at = pos + parents[j] * 3;
-                double turned[3];
-                quat_rotate(parent, lpos + j * 3, turned);
-                pos[j * 3] = at[0] + turned[0];
-                pos[j * 3 + 1] = at[1] + turned[1];
-                pos[j * 3 + 2] = at[2] + turned[2];
-                quat_mul(parent, lrot + j * 4, rot + j * 4);
+        for (Py_ssize_t j = 1; j < joints; j++) { /* joint by joint, as NumPy's: a parent is done before its children */
+            const double *parent_rot = rot + parents[j] * frames * 4, *parent_pos = pos + parents[j] * frames * 3;
+            double *joint_rot = rot + j * frames * 4, *joint_pos = pos + j * frames * 3;
+            for (Py_ssize_t f = 0; f < frames; f++) {
+                double turned[3], product[4];
+                quat_rotate(parent_rot + f * 4, joint_pos + f * 3, turned);
+                joint_pos[f * 3] = parent_pos[f * 3] + turned[0];
+                joint_pos[f * 3 + 1] = parent_pos[f * 3 + 1] + turned[1];
+                joint_pos[f * 3 + 2] = parent_pos[f * 3 + 2] + turned[2];
+                quat_mul(parent_rot + f * 4, joint_rot + f * 4, product);
+                memcpy(joint_rot + f * 4, product, sizeof(product));
             }
         }
         Py_END_ALLOW_THREADS
@@ -291,7 +281,7 @@ static PyMethodDef methods[] = {
     {"local_from_world", local_from_world, METH_VARARGS,
      "local_from_world(parents, world_rot, world_pos, local_rot, local_pos, frames, joints): world to local."},
     {"forward_kinematics", forward_kinematics, METH_VARARGS,
-     "forward_kinematics(parents, local_rot, local_pos, world_rot, world_pos, frames, joints): local to world."},
+     "forward_kinematics(parents, rot, pos, frames, joints): joint-major local to world, in place."},
     {"chain_frames", chain_frames, METH_VARARGS,
      "chain_frames(out, positions, heads, starts, cuts, direction, frames, joints, links): frames along links."},
     {NULL, NULL, 0, NULL},

@@ -35,18 +35,14 @@ def forward_kinematics(
     where it was built (``compiled``: the same bits, a tenth of the time).
     """
     parents = np.asarray(parents)
-    local_rot = np.asarray(local_rot, dtype=np.float64)
-    local_pos = np.asarray(local_pos, dtype=np.float64)
-    if (compiled and _kernels is not None and local_rot.ndim == 3 and local_rot.shape[2:] == (4,)
-            and local_pos.shape == local_rot.shape[:2] + (3,) and len(parents) == local_rot.shape[1]):
-        world_rot, world_pos = np.empty(local_rot.shape), np.empty(local_pos.shape)
-        _kernels.forward_kinematics(np.ascontiguousarray(parents, dtype=np.int64), np.ascontiguousarray(local_rot),
-                                    np.ascontiguousarray(local_pos), world_rot, world_pos, *local_rot.shape[:2])
-        return world_rot, world_pos
     # Always copies: for a single frame the swapped view is contiguous already, and writing into
     # it changed the caller's motion (and the clip a one-frame slice was cut from).
     rot = np.array(np.swapaxes(local_rot, 0, 1), dtype=np.float64, order="C")
     pos = np.array(np.swapaxes(local_pos, 0, 1), dtype=np.float64, order="C")
+    if (compiled and _kernels is not None and rot.ndim == 3 and rot.shape[2:] == (4,)
+            and pos.shape == rot.shape[:2] + (3,) and len(parents) == len(rot)):
+        _kernels.forward_kinematics(np.ascontiguousarray(parents, dtype=np.int64), rot, pos, rot.shape[1], len(rot))
+        return np.swapaxes(rot, 0, 1), np.swapaxes(pos, 0, 1)
     for j in range(1, len(parents)):
         p = parents[j]
         pos[j] = pos[p] + quat_rotate(rot[p], pos[j])
