@@ -567,3 +567,21 @@ def test_the_pictures_say_what_the_binding_left_unpaired_as_exaggerate_does(tmp_
     quiet = subprocess.run(CLI + ["-q", args[0], str(clip), *args[1:], "--skin", str(ROBOT), "--overwrite"],
                            capture_output=True, text=True, timeout=300)
     assert quiet.returncode == 0 and quiet.stderr == "", quiet.stderr
+
+
+@needs_makehuman
+def test_two_makehuman_weights_files_beside_the_body_are_refused_not_one_picked(tmp_path):
+    """With a second .mhw beside the .obj the first by name was used without a word (a new-user trial
+    edited a copy and saw nothing change): now one line naming both, exit 2."""
+    import shutil
+
+    for name in ("makehuman_base.obj", "makehuman_default_weights.mhw", "makehuman_default.mhskel"):
+        shutil.copy(SKIN_DIR / name, tmp_path / name)
+    shutil.copy(SKIN_DIR / "makehuman_default_weights.mhw", tmp_path / "aaa_other.mhw")
+    with pytest.raises(InputError, match="2 .mhw weights files beside the .obj .aaa_other.mhw, makehuman_default"):
+        load_skin(tmp_path / "makehuman_base.obj")
+    clip = SAMPLE_DIR / "cmu_09_01_run_daz.bvh"
+    done = subprocess.run(CLI + ["preview", str(clip), "-o", str(tmp_path / "look.png"), "--skin",
+                                 str(tmp_path / "makehuman_base.obj")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1 and "aaa_other.mhw" in done.stderr
+    assert not (tmp_path / "look.png").exists()

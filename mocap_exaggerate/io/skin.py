@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import InputError
+from ..core.errors import InputError, printable
 from ..core.rotations import quat_to_matrix, vector_norm
 from ..rig.skinning import Skin, top_influences
 from .files import LIMITS, read_limited, regular_file
@@ -85,6 +85,10 @@ def load_makehuman_skin(obj_path: str | os.PathLike, weights_path: str | os.Path
         found = sorted(obj_path.parent.glob("*.mhw"))
         if not found:
             raise InputError("no .mhw weights file beside the .obj", source=str(obj_path))
+        if len(found) > 1:  # (the first by name was taken without a word: an edited copy beside it went unseen)
+            shown = ", ".join(printable(p.name[:80]) for p in found[:4]) + (", ..." if len(found) > 4 else "")
+            raise InputError(f"{len(found)} .mhw weights files beside the .obj ({shown}): keep only the one to use "
+                             "beside it", source=str(obj_path))
         weights_path = found[0]
     vertices, faces = _read_obj_group(obj_path, "body")
     try:
