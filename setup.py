@@ -9,19 +9,25 @@ Everything else is declared in pyproject.toml.
 
 from setuptools import Extension, setup
 
+#: No fused multiply-add: ``-ffp-contract=off`` alone is not enough where CFLAGS carry ``-march=native``
+#: (or haswell): GCC's straight-line vectoriser then fused quat_mul's products and sums into
+#: ``vfmsubadd`` instructions, and forward kinematics differed from NumPy's in the last bit. Without it
+#: the loops are scalar, each operation rounded once, as NumPy's are.
+NO_FUSING = ["-O2", "-ffp-contract=off", "-fno-tree-slp-vectorize", "-fno-tree-vectorize"]
+
 setup(
     ext_modules=[
         Extension(
             "mocap_exaggerate.io._formatting",
             ["mocap_exaggerate/io/_formatting.c"],
-            # No fused multiply-add or fast-math: the rounding is NumPy's, bit for bit.
-            extra_compile_args=["-O2", "-ffp-contract=off"],
+            # No fused multiply-add or fast-math: the rounding is NumPy's, bit for bit (NO_FUSING).
+            extra_compile_args=NO_FUSING,
             optional=True,
         ),
         Extension(
             "mocap_exaggerate.core._kernels",
             ["mocap_exaggerate/core/_kernels.c"],
-            extra_compile_args=["-O2", "-ffp-contract=off"],  # NumPy's rounding, bit for bit
+            extra_compile_args=NO_FUSING,  # NumPy's rounding, bit for bit
             optional=True,
         ),
     ]

@@ -585,3 +585,21 @@ def test_two_makehuman_weights_files_beside_the_body_are_refused_not_one_picked(
                                  str(tmp_path / "makehuman_base.obj")], capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1 and "aaa_other.mhw" in done.stderr
     assert not (tmp_path / "look.png").exists()
+
+
+def test_a_skins_rest_pose_counts_in_the_parameters_digest(tmp_path):
+    """Two weights files that differ only in their rest_pose make different GLBs: `batch --resume` must
+    not take one's outputs for the other's (a review found the digest blind to it). A skin with no pose
+    keeps the digest it had."""
+    from mocap_exaggerate.config import PipelineConfig
+    from mocap_exaggerate.io.skin import npz_bytes
+    from mocap_exaggerate.jobs.job import parameters_digest
+
+    arrays = dict(vertices=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]), joint_names=np.array(["a", "b"]),
+                  joints=np.zeros((3, 1), int), weights=np.ones((3, 1)))
+    digests = []
+    for k, pose in enumerate([None, [[0.0, 0, 0, 1], [0, 0, 0, 1]], [[0.0, 0, 0, 1], [0, 0.6, 0, 0.8]]]):
+        path = tmp_path / f"{k}.npz"
+        path.write_bytes(npz_bytes(**arrays, **({} if pose is None else {"rest_pose": np.array(pose)})))
+        digests.append(parameters_digest(PipelineConfig(), skin=path))
+    assert digests[0] == digests[1] != digests[2]

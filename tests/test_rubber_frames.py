@@ -337,6 +337,17 @@ def test_the_compiled_kernels_are_built_where_ci_runs_and_refuse_what_they_canno
         kernels.forward_kinematics(np.array([0, 0, 1]), rot.copy(), pos.copy(), 2, 3)
     with pytest.raises(ValueError, match="outside"):
         kernels.chain_frames(rot.copy(), pos, np.array([0]), np.array([1]), np.array([2]), np.zeros((1, 3)), 2, 3, 1)
+    # Sizes and indices whose sums or products would wrap (a review found a crash and reads past the arrays):
+    with pytest.raises(ValueError, match="outside"):
+        kernels.chain_frames(rot.copy(), pos, np.array([0]), np.array([2]), np.array([2**63 - 1]), np.zeros((1, 3)),
+                             2, 3, 1)
+    with pytest.raises(ValueError, match="count|buffer"):
+        kernels.chain_frames(rot.copy(), pos, np.array([0]), np.array([1]), np.array([1]), np.zeros((1, 3)), 2, 3,
+                             2**61 + 1)
+    with pytest.raises(ValueError, match="count|buffer"):
+        kernels.forward_kinematics(np.array([-1]), np.zeros((0, 4)), np.zeros((0, 3)), 0, 2**61 + 1)
+    with pytest.raises(ValueError, match="count|buffer"):
+        kernels.local_from_world(np.array([-1]), rot, pos, rot.copy(), pos.copy(), 2**40, 2**40)
     with pytest.raises(ValueError, match="contiguous"):  # (NumPy's own refusal to lend a strided view)
         kernels.chain_frames(rot[:, ::2], pos, np.array([0]), np.array([1]), np.array([1]), np.zeros((1, 3)), 2, 3, 1)
     with pytest.raises(ValueError, match="read-only"):  # an output NumPy will not lend for writing

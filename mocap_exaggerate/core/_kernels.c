@@ -1,11 +1,12 @@
-/* Quaternion loops NumPy runs as many small passes: forward kinematics, world-to-local and the
- * rotation-minimising frames carried along each cut link (stages/orient.py), frame by frame in one
- * pass over memory.
+/* Quaternion loops NumPy runs as many small passes: forward kinematics (joint by joint, as NumPy's),
+ * world-to-local and the rotation-minimising frames carried along each cut link (stages/orient.py),
+ * frame by frame, in one pass over memory.
  *
  * Every number is computed with the operations NumPy's code uses, in the same order (core/rotations.py:
  * quat_mul, quat_rotate, quat_between, quat_normalize, _norm): +, -, *, / and sqrt only, each rounded
- * once (built without fused multiply-add: setup.py), so the results are NumPy's bit for bit and an
- * install without a C compiler, which runs the NumPy code, writes the same bytes. The tests compare both.
+ * once (built without fused multiply-add or vectorising: setup.py), so the results are NumPy's bit for
+ * bit (a NaN's sign bit aside, which no output carries: the BVH writer refuses NaN) and an install
+ * without a C compiler, which runs the NumPy code, writes the same bytes. The tests compare both.
  *
  * local_from_world(parents, world_rot, world_pos, local_rot, local_pos)
  *     parents (J,) int64 with parents[0] = -1 and parents[j] < j; world_rot (F, J, 4), world_pos (F, J, 3);
@@ -106,7 +107,8 @@ static int get_array(PyObject *object, Py_buffer *view, const char *format, Py_s
     const Py_ssize_t size = format[0] == 'd' ? (Py_ssize_t)sizeof(double) : (Py_ssize_t)sizeof(int64_t);
     int same = view->format != NULL && (strcmp(view->format, format) == 0 ||
                                          (format[0] == 'q' && strcmp(view->format, "l") == 0 && sizeof(long) == 8));
-    if (!same || view->itemsize != size || view->len != count * size) {
+    /* count * size must not wrap (Python builds with -fwrapv): a count past what memory holds is refused */
+    if (!same || view->itemsize != size || count < 0 || count > PY_SSIZE_T_MAX / size || view->len != count * size) {
         PyBuffer_Release(view);
         PyErr_Format(PyExc_ValueError, "%s: a C-contiguous buffer of %zd %s", name, count,
                      format[0] == 'd' ? "float64" : "int64");
@@ -121,7 +123,7 @@ static PyObject *local_from_world(PyObject *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "OOOOOnn", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4], &frames,
                           &joints))
         return NULL;
-    if (frames < 0 || joints < 1 || frames > PY_SSIZE_T_MAX / 4 / joints) {
+    if (frames < 0 || joints < 1 || joints > PY_SSIZE_T_MAX / 64 || frames > PY_SSIZE_T_MAX / 64 / joints) {
         PyErr_SetString(PyExc_ValueError, "local_from_world: bad frame or joint count");
         return NULL;
     }
@@ -175,7 +177,7 @@ static PyObject *forward_kinematics(PyObject *self, PyObject *args) {
     PyObject *objects[3];
     Py_ssize_t frames, joints;
     if (!PyArg_ParseTuple(args, "OOOnn", &objects[0], &objects[1], &objects[2], &frames, &joints)) return NULL;
-    if (frames < 0 || joints < 1 || frames > PY_SSIZE_T_MAX / 4 / joints) {
+    if (frames < 0 || joints < 1 || joints > PY_SSIZE_T_MAX / 64 || frames > PY_SSIZE_T_MAX / 64 / joints) {
         PyErr_SetString(PyExc_ValueError, "forward_kinematics: bad frame or joint count");
         return NULL;
     }
@@ -224,7 +226,8 @@ static PyObject *chain_frames(PyObject *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "OOOOOOnnn", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
                           &objects[5], &frames, &joints, &links))
         return NULL;
-    if (frames < 0 || joints < 1 || links < 0 || frames > PY_SSIZE_T_MAX / 4 / joints) {
+    if (frames < 0 || joints < 1 || links < 0 || joints > PY_SSIZE_T_MAX / 64 || links > PY_SSIZE_T_MAX / 64 ||
+        frames > PY_SSIZE_T_MAX / 64 / joints) {
         PyErr_SetString(PyExc_ValueError, "chain_frames: bad frame, joint or link count");
         return NULL;
     }
@@ -240,7 +243,8 @@ static PyObject *chain_frames(PyObject *self, PyObject *args) {
         const int64_t *heads = (const int64_t *)views[2].buf, *starts = (const int64_t *)views[3].buf;
         const int64_t *cuts = (const int64_t *)views[4].buf;
         for (Py_ssize_t l = 0; l < links && !bad; l++) /* every joint read or written inside the arrays */
-            bad = heads[l] < 0 || heads[l] >= joints || starts[l] < 0 || cuts[l] < 0 || starts[l] + cuts[l] >= joints;
+            bad = heads[l] < 0 || heads[l] >= joints || starts[l] < 0 || starts[l] >= joints || cuts[l] < 0 ||
+                  cuts[l] >= joints - starts[l]; /* (written so that no sum wraps) */
         if (bad) PyErr_SetString(PyExc_ValueError, "chain_frames: a link's joints are outside the skeleton");
     }
     if (!bad) {

@@ -31,8 +31,8 @@ def forward_kinematics(
     local_pos : (F, J, 3) float64, each joint's translation from its parent (the root's: world)
 
     The work is done joint by joint on ``(J, F, ...)`` copies, so each
-    joint's frames are contiguous in memory; or frame by frame by ``core/_kernels.c``
-    where it was built (``compiled``: the same bits, a tenth of the time).
+    joint's frames are contiguous in memory, by ``core/_kernels.c`` where it was
+    built (``compiled``: the same bits, about half the time; the copies are the rest).
     """
     parents = np.asarray(parents)
     # Always copies: for a single frame the swapped view is contiguous already, and writing into
@@ -60,7 +60,7 @@ def local_from_world(
     in its parent's frame. With ``overwrite_rotations`` the local rotations are
     written over ``world_rot`` (a float64 array), a block of frames at a time
     (each block read whole before it is written): a long clip's copy saved.
-    ``compiled``: by ``core/_kernels.c`` where it was built (the same bits, a fifth of the time).
+    ``compiled``: by ``core/_kernels.c`` where it was built (the same bits, a tenth of the time).
     """
     parents = np.asarray(parents)
     if overwrite_rotations and not (isinstance(world_rot, np.ndarray) and world_rot.dtype == np.float64):

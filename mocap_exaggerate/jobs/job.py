@@ -158,8 +158,10 @@ def parameters_digest(config: PipelineConfig, *, preset: str | None = None, glb:
 
             value = load_skin(value)
         arrays = [np.ascontiguousarray(a).tobytes() for a in (value.vertices, value.faces, value.joints, value.weights)]
-        names = json.dumps([list(value.joint_names), {k: np.asarray(v).tolist() for k, v in sorted(value.bind.items())}])
-        return digest_of(arrays + [names.encode("utf-8")])
+        said = [list(value.joint_names), {k: np.asarray(v).tolist() for k, v in sorted(value.bind.items())}]
+        if value.pose:  # (a skin bound in a pose of its own: only then, so other digests stay what they were)
+            said.append({k: list(v) for k, v in sorted(value.pose.items())})
+        return digest_of(arrays + [json.dumps(said).encode("utf-8")])
 
     from .. import __version__
 

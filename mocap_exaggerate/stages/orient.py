@@ -247,7 +247,7 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
     sub-link back past 120 degrees) or near half a turn, it fades out
     smoothly, and it is eased over a frame either way, so every frame follows
     from its neighbours. ``compiled``: the frames carried along the links by
-    ``core/_kernels.c`` where it was built (the same bits, a tenth of the time).
+    ``core/_kernels.c`` where it was built (the same bits, half the stage's time).
     """
     sub = hierarchy.skeleton
     out = np.empty(positions.shape[:2] + (4,))
