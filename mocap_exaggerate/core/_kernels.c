@@ -117,16 +117,30 @@ static int get_array(PyObject *object, Py_buffer *view, const char *format, Py_s
     return 0;
 }
 
+/* Frame and joint counts whose products with a transform's width cannot wrap; else a ValueError. */
+static int counts_fit(Py_ssize_t frames, Py_ssize_t joints, const char *name) {
+    if (frames < 0 || joints < 1 || joints > PY_SSIZE_T_MAX / 64 || frames > PY_SSIZE_T_MAX / 64 / joints) {
+        PyErr_Format(PyExc_ValueError, "%s: bad frame or joint count", name);
+        return 0;
+    }
+    return 1;
+}
+
+/* parents[0] = -1 and every other parent before its child; else a ValueError. */
+static int parents_in_order(const int64_t *parents, Py_ssize_t joints, const char *name) {
+    int bad = parents[0] != -1;
+    for (Py_ssize_t j = 1; j < joints && !bad; j++) bad = parents[j] < 0 || parents[j] >= j;
+    if (bad) PyErr_Format(PyExc_ValueError, "%s: parents must start at -1, each before its child", name);
+    return !bad;
+}
+
 static PyObject *local_from_world(PyObject *self, PyObject *args) {
     PyObject *objects[5];
     Py_ssize_t frames, joints;
     if (!PyArg_ParseTuple(args, "OOOOOnn", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4], &frames,
                           &joints))
         return NULL;
-    if (frames < 0 || joints < 1 || joints > PY_SSIZE_T_MAX / 64 || frames > PY_SSIZE_T_MAX / 64 / joints) {
-        PyErr_SetString(PyExc_ValueError, "local_from_world: bad frame or joint count");
-        return NULL;
-    }
+    if (!counts_fit(frames, joints, "local_from_world")) return NULL;
     Py_buffer views[5];
     const char *formats[5] = {"q", "d", "d", "d", "d"};
     const Py_ssize_t counts[5] = {joints, frames * joints * 4, frames * joints * 3, frames * joints * 4,
@@ -137,11 +151,7 @@ static PyObject *local_from_world(PyObject *self, PyObject *args) {
         if (get_array(objects[got], &views[got], formats[got], counts[got], got >= 3, names[got]) < 0) break;
     int bad = got < 5;
     const int64_t *parents = bad ? NULL : (const int64_t *)views[0].buf;
-    if (!bad) {
-        bad = parents[0] != -1;
-        for (Py_ssize_t j = 1; j < joints && !bad; j++) bad = parents[j] < 0 || parents[j] >= j;
-        if (bad) PyErr_SetString(PyExc_ValueError, "local_from_world: parents must start at -1, each before its child");
-    }
+    if (!bad) bad = !parents_in_order(parents, joints, "local_from_world");
     if (!bad) {
         const double *world_rot = (const double *)views[1].buf;
         const double *world_pos = (const double *)views[2].buf;
@@ -177,10 +187,7 @@ static PyObject *forward_kinematics(PyObject *self, PyObject *args) {
     PyObject *objects[3];
     Py_ssize_t frames, joints;
     if (!PyArg_ParseTuple(args, "OOOnn", &objects[0], &objects[1], &objects[2], &frames, &joints)) return NULL;
-    if (frames < 0 || joints < 1 || joints > PY_SSIZE_T_MAX / 64 || frames > PY_SSIZE_T_MAX / 64 / joints) {
-        PyErr_SetString(PyExc_ValueError, "forward_kinematics: bad frame or joint count");
-        return NULL;
-    }
+    if (!counts_fit(frames, joints, "forward_kinematics")) return NULL;
     Py_buffer views[3];
     const char *formats[3] = {"q", "d", "d"};
     const Py_ssize_t counts[3] = {joints, joints * frames * 4, joints * frames * 3};
@@ -190,12 +197,7 @@ static PyObject *forward_kinematics(PyObject *self, PyObject *args) {
         if (get_array(objects[got], &views[got], formats[got], counts[got], got >= 1, names[got]) < 0) break;
     int bad = got < 3;
     const int64_t *parents = bad ? NULL : (const int64_t *)views[0].buf;
-    if (!bad) {
-        bad = parents[0] != -1;
-        for (Py_ssize_t j = 1; j < joints && !bad; j++) bad = parents[j] < 0 || parents[j] >= j;
-        if (bad)
-            PyErr_SetString(PyExc_ValueError, "forward_kinematics: parents must start at -1, each before its child");
-    }
+    if (!bad) bad = !parents_in_order(parents, joints, "forward_kinematics");
     if (!bad) {
         double *rot = (double *)views[1].buf;
         double *pos = (double *)views[2].buf;
