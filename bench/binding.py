@@ -68,7 +68,7 @@ def main() -> None:
         frames = np.linspace(0, result.motion.num_frames - 1, min(12, result.motion.num_frames)).astype(int)
         cartoon = stretched(rubber, reference, out.rest_positions(), result.world_rotations, result.world_positions,
                             index, frames)
-        print(f"{path.name[:44]:44s} {seconds * 1e3:5.0f} {len(binding.pairs):5d} {getattr(binding, 'posed', 0):5d} "
+        print(f"{path.name[:44]:44s} {seconds * 1e3:5.0f} {len(binding.pairs):5d} {binding.posed:5d} "
               f"{captured[0]:12.2%} {captured[1]:6.2f} {cartoon[0]:11.2%} {cartoon[1]:6.2f}")
 
 

@@ -117,6 +117,25 @@ static int get_array(PyObject *object, Py_buffer *view, const char *format, Py_s
     return 0;
 }
 
+/* The arrays of a call, in order (`writable[k]` 'w' for an output), each checked by get_array; how many were
+ * got (all of them, or fewer with the error set). */
+static int get_arrays(PyObject **objects, Py_buffer *views, const char *formats, const char *writable,
+                      const Py_ssize_t *counts, const char **names, int n) {
+    char format[2] = {0, 0};
+    for (int k = 0; k < n; k++) {
+        format[0] = formats[k];
+        if (get_array(objects[k], &views[k], format, counts[k], writable[k] == 'w', names[k]) < 0) return k;
+    }
+    return n;
+}
+
+/* The end of a call: every array got let go; None, or NULL with the error set when it went bad. */
+static PyObject *finish(Py_buffer *views, int got, int bad) {
+    for (int k = 0; k < got; k++) PyBuffer_Release(&views[k]);
+    if (bad) return NULL;
+    Py_RETURN_NONE;
+}
+
 /* Frame and joint counts whose products with a transform's width cannot wrap; else a ValueError. */
 static int counts_fit(Py_ssize_t frames, Py_ssize_t joints, const char *name) {
     if (frames < 0 || joints < 1 || joints > PY_SSIZE_T_MAX / 64 || frames > PY_SSIZE_T_MAX / 64 / joints) {
@@ -142,13 +161,10 @@ static PyObject *local_from_world(PyObject *self, PyObject *args) {
         return NULL;
     if (!counts_fit(frames, joints, "local_from_world")) return NULL;
     Py_buffer views[5];
-    const char *formats[5] = {"q", "d", "d", "d", "d"};
     const Py_ssize_t counts[5] = {joints, frames * joints * 4, frames * joints * 3, frames * joints * 4,
                                   frames * joints * 3};
     const char *names[5] = {"parents", "world_rot", "world_pos", "local_rot", "local_pos"};
-    int got = 0;
-    for (; got < 5; got++)
-        if (get_array(objects[got], &views[got], formats[got], counts[got], got >= 3, names[got]) < 0) break;
+    int got = get_arrays(objects, views, "qdddd", "rrrww", counts, names, 5);
     int bad = got < 5;
     const int64_t *parents = bad ? NULL : (const int64_t *)views[0].buf;
     if (!bad) bad = !parents_in_order(parents, joints, "local_from_world");
@@ -178,9 +194,7 @@ static PyObject *local_from_world(PyObject *self, PyObject *args) {
         }
         Py_END_ALLOW_THREADS
     }
-    for (int k = 0; k < got; k++) PyBuffer_Release(&views[k]);
-    if (bad) return NULL;
-    Py_RETURN_NONE;
+    return finish(views, got, bad);
 }
 
 static PyObject *forward_kinematics(PyObject *self, PyObject *args) {
@@ -189,12 +203,9 @@ static PyObject *forward_kinematics(PyObject *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "OOOnn", &objects[0], &objects[1], &objects[2], &frames, &joints)) return NULL;
     if (!counts_fit(frames, joints, "forward_kinematics")) return NULL;
     Py_buffer views[3];
-    const char *formats[3] = {"q", "d", "d"};
     const Py_ssize_t counts[3] = {joints, joints * frames * 4, joints * frames * 3};
     const char *names[3] = {"parents", "rot", "pos"};
-    int got = 0;
-    for (; got < 3; got++)
-        if (get_array(objects[got], &views[got], formats[got], counts[got], got >= 1, names[got]) < 0) break;
+    int got = get_arrays(objects, views, "qdd", "rww", counts, names, 3);
     int bad = got < 3;
     const int64_t *parents = bad ? NULL : (const int64_t *)views[0].buf;
     if (!bad) bad = !parents_in_order(parents, joints, "forward_kinematics");
@@ -217,9 +228,7 @@ static PyObject *forward_kinematics(PyObject *self, PyObject *args) {
         }
         Py_END_ALLOW_THREADS
     }
-    for (int k = 0; k < got; k++) PyBuffer_Release(&views[k]);
-    if (bad) return NULL;
-    Py_RETURN_NONE;
+    return finish(views, got, bad);
 }
 
 static PyObject *chain_frames(PyObject *self, PyObject *args) {
@@ -234,12 +243,9 @@ static PyObject *chain_frames(PyObject *self, PyObject *args) {
         return NULL;
     }
     Py_buffer views[6];
-    const char *formats[6] = {"d", "d", "q", "q", "q", "d"};
     const Py_ssize_t counts[6] = {frames * joints * 4, frames * joints * 3, links, links, links, links * 3};
     const char *names[6] = {"out", "positions", "heads", "starts", "cuts", "direction"};
-    int got = 0;
-    for (; got < 6; got++)
-        if (get_array(objects[got], &views[got], formats[got], counts[got], got == 0, names[got]) < 0) break;
+    int got = get_arrays(objects, views, "ddqqqd", "wrrrrr", counts, names, 6);
     int bad = got < 6;
     if (!bad) {
         const int64_t *heads = (const int64_t *)views[2].buf, *starts = (const int64_t *)views[3].buf;
@@ -278,9 +284,7 @@ static PyObject *chain_frames(PyObject *self, PyObject *args) {
         }
         Py_END_ALLOW_THREADS
     }
-    for (int k = 0; k < got; k++) PyBuffer_Release(&views[k]);
-    if (bad) return NULL;
-    Py_RETURN_NONE;
+    return finish(views, got, bad);
 }
 
 static PyMethodDef methods[] = {

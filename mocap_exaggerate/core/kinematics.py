@@ -18,7 +18,8 @@ try:  # optional: setup.py builds it where there is a C compiler
 except ImportError:  # pragma: no cover - the NumPy code gives the same bits
     _kernels = None
 
-__all__ = ["forward_kinematics", "local_from_world", "rest_positions", "frame_blocks", "cache_blocks", "CACHE_ELEMENTS"]
+__all__ = ["forward_kinematics", "local_from_world", "parent_rotations", "rest_positions", "frame_blocks", "cache_blocks",
+           "CACHE_ELEMENTS"]
 
 
 def forward_kinematics(
@@ -83,6 +84,13 @@ def local_from_world(
             local_rot[part, 1:] = quat_mul(inverse, world_rot[part, 1:])
             local_pos[part, 1:] = quat_rotate(inverse, world_pos[part, 1:] - world_pos[part, parents[1:]])
     return local_rot, local_pos
+
+
+def parent_rotations(parents: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """``(J, 4)``: each joint's parent's world rotation of one pose ``world (J, 4)``, the identity for the root."""
+    from .rotations import quat_identity
+
+    return np.concatenate([quat_identity((1,)), np.asarray(world)[np.asarray(parents)[1:]]])
 
 
 def frame_blocks(frames: int, size: int = 1024):

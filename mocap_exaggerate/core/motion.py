@@ -6,8 +6,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .kinematics import forward_kinematics
-from .rotations import quat_identity, quat_inv, quat_mul, quat_rotate
+from .kinematics import forward_kinematics, parent_rotations
+from .rotations import quat_inv, quat_mul, quat_rotate
 from .skeleton import Skeleton
 
 __all__ = ["Motion"]
@@ -115,7 +115,7 @@ class Motion:
         """
         skeleton = self.skeleton
         rested, world = skeleton.posed(pose)
-        above = np.concatenate([quat_identity((1,)), world[skeleton.parents[1:]]])  # the parent's, the root's none
+        above = parent_rotations(skeleton.parents, world)
         rotations = quat_mul(quat_mul(above, self.local_rotations), quat_inv(world))
         rotations *= np.where(rotations[..., 3:] < 0.0, -1.0, 1.0)
         return Motion(rested, self.frame_time, rotations, quat_rotate(above, self.local_positions))

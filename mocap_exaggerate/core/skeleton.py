@@ -8,8 +8,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import check_choice
-from .kinematics import forward_kinematics, rest_positions
-from .rotations import quat_identity, quat_rotate
+from .kinematics import forward_kinematics, parent_rotations, rest_positions
+from .rotations import quat_rotate
 
 __all__ = ["Skeleton", "POSITION_CHANNELS", "ROTATION_CHANNELS"]
 
@@ -177,7 +177,7 @@ class Skeleton:
         if pose.shape != (self.num_joints, 4):
             raise ValueError(f"pose must be ({self.num_joints}, 4), got {pose.shape}")
         world = forward_kinematics(self.parents, pose[None], np.zeros((1, self.num_joints, 3)))[0][0]
-        above = np.concatenate([quat_identity((1,)), world[self.parents[1:]]])
+        above = parent_rotations(self.parents, world)
         end_sites = quat_rotate(world, np.nan_to_num(self.end_sites))
         end_sites[np.isnan(self.end_sites)] = np.nan
         return replace(self, offsets=quat_rotate(above, self.offsets), end_sites=end_sites), world

@@ -13,7 +13,7 @@ import numpy as np
 
 from .. import __version__
 from ..config import PipelineConfig
-from ..core.errors import ConfigError, printable
+from ..core.errors import ConfigError
 from ..core.kinematics import cache_blocks
 from ..core.motion import Motion
 from ..core.rotations import quat_identity, vector_norm
@@ -172,12 +172,7 @@ def at_bind_pose(motion: Motion, result: PipelineResult | None, skin: Skin
     """
     if not skin.pose:
         return motion, result, skin
-    pose = np.tile(quat_identity(), (motion.skeleton.num_joints, 1))
-    for name, turn in skin.pose.items():
-        if name not in motion.skeleton.names:
-            raise ConfigError(f"the skin is bound in a pose that turns '{printable(name[:80])}', which is not a joint "
-                              "of the clip")
-        pose[motion.skeleton.index(name)] = turn
+    pose = skin.pose_rows(motion.skeleton.names)
     posed = motion.with_rest(pose)
     if result is not None:
         output_pose = np.tile(quat_identity(), (result.motion.skeleton.num_joints, 1))
@@ -253,7 +248,7 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
 
     scale, how = unit_scale(units, motion.skeleton.height())
     based = base_skin(motion, result, skin, joint_map)
-    pose = based.pose
+    posed_skin = based
     motion, result, based = at_bind_pose(motion, result, based)
     bound = output_skin(motion, result, based, influences)
     from ..analysis.limbs import standing_up
@@ -263,8 +258,8 @@ def glb_files(motion: Motion, result: PipelineResult, skin: Skin | None = None, 
     thickness = output_thickness(result)
     glb = glb_pieces(result.motion, bound, meters_per_unit=scale, thickness=thickness, up=up)
     posed = {}
-    if pose:  # the mesh is in the GLB's rest pose, the BVH's posed so: how, for the .npz read back as a skin
-        posed["rest_pose"] = np.array([pose.get(name, (0.0, 0.0, 0.0, 1.0)) for name in bound.joint_names])
+    if posed_skin.pose:  # the mesh is in the GLB's rest, the BVH's posed so: how, for the .npz read back as a skin
+        posed["rest_pose"] = posed_skin.pose_rows(bound.joint_names)
     weights = npz_bytes(joint_names=np.array(bound.joint_names), joints=bound.joints, weights=bound.weights,
                         vertices=bound.vertices, faces=bound.faces, **posed)
     scene = None

@@ -54,6 +54,7 @@ import numpy as np
 
 from ..analysis.limbs import find_limbs, main_child
 from ..core.errors import ConfigError, InputError
+from ..core.kinematics import parent_rotations
 from ..core.rotations import quat_between, quat_identity, quat_inv, quat_mul, quat_rotate, quat_to_matrix
 from ..core.skeleton import Skeleton
 from .skinning import Skin, top_influences
@@ -493,7 +494,7 @@ def _limb_pose(clip: Skeleton, rest: np.ndarray, clip_index: np.ndarray, placed:
         if j in aims:
             c = aims[j]
             world[j] = quat_mul(quat_between(quat_rotate(above, rest[c] - rest[j]), source[c] - source[j]), above)
-    local = quat_mul(quat_inv(np.concatenate([quat_identity((1,)), world[clip.parents[1:]]])), world)
+    local = quat_mul(quat_inv(parent_rotations(clip.parents, world)), world)
     local *= np.where(local[:, 3:] < 0.0, -1.0, 1.0)
     local[np.all(np.abs(local[:, :3]) <= 1e-12, axis=1)] = quat_identity()
     return local

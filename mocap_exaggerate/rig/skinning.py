@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..core.errors import ConfigError
+from ..core.errors import ConfigError, printable
 from ..core.rotations import quat_rotate, vector_norm
 from ..core.skeleton import Skeleton
 from ..stages.subjoints import SubjointHierarchy
@@ -81,6 +81,19 @@ class Skin:
     @property
     def num_vertices(self) -> int:
         return len(self.vertices)
+
+    def pose_rows(self, names) -> np.ndarray:
+        """``(len(names), 4)``: `pose`'s local rotation of each joint named, the identity where it turns
+        none; a ConfigError where `pose` turns a joint not among ``names`` (a skin bound to another clip)."""
+        index = {name: k for k, name in enumerate(names)}
+        rows = np.zeros((len(index), 4))
+        rows[:, 3] = 1.0
+        for name, turn in self.pose.items():
+            if name not in index:
+                raise ConfigError(f"the skin is bound in a pose that turns '{printable(name[:80])}', which is not "
+                                  "a joint of the clip")
+            rows[index[name]] = turn
+        return rows
 
 
 def top_influences(rows: np.ndarray, cols: np.ndarray, values: np.ndarray, num_rows: int, k: int):
