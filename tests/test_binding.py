@@ -511,6 +511,7 @@ def test_the_glb_and_the_weights_of_a_body_bound_in_its_own_pose_reproduce_the_r
     (np.full((2, 4), np.nan), "not finite"),
     (np.array([[0.0, 0, 0, np.inf], [0, 0, 0, 1]]), "not finite"),
     (np.array([[0.0, 0, 0, 2], [0, 0, 0, 1]]), "unit length"),
+    (np.full((2, 4), 1e308), "unit length"),  # (its norm overflowed into a RuntimeWarning on stderr)
     (np.array([["a", "b", "c", "d"]] * 2), "must be"),
 ])
 def test_a_weights_file_with_a_bad_rest_pose_is_refused_in_one_line(tmp_path, pose, why):

@@ -68,7 +68,8 @@ def load_npz_skin(path: str | os.PathLike) -> Skin:
                              "quaternion a joint", source=label)
         if not np.all(np.isfinite(turns)):
             raise InputError("rest_pose holds a value that is not finite (NaN or infinite)", source=label)
-        if len(turns) and np.abs(np.linalg.norm(turns, axis=1) - 1.0).max() > 1e-4:
+        # (a part past 1 is not of a unit quaternion: said before a norm of 1e308s overflows into a warning)
+        if len(turns) and (np.abs(turns).max() > 1.0 + 1e-4 or np.abs(np.linalg.norm(turns, axis=1) - 1.0).max() > 1e-4):
             raise InputError("rest_pose holds a quaternion that is not of unit length", source=label)
         turns = turns / np.linalg.norm(turns, axis=1, keepdims=True)
         pose = {names[k]: tuple(map(float, turns[k])) for k in range(len(names)) if abs(turns[k, 3]) < 1.0}
