@@ -28,6 +28,7 @@ setup(
             "mocap_exaggerate.core._kernels",
             ["mocap_exaggerate/core/_kernels.c"],
             extra_compile_args=NO_FUSING,  # NumPy's rounding, bit for bit
+            libraries=["m"],  # sin and cos: the C library's, as NumPy's float64 loops call them
             optional=True,
         ),
     ]

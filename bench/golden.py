@@ -3,6 +3,10 @@
     python bench/golden.py --write before.json          # on the old tree
     python bench/golden.py --check before.json          # on the new one: lists every file that differs
 
+    python bench/golden.py --write before.json --keep old/   # each run's files kept, then
+    python bench/golden.py --check before.json --keep new/
+    python bench/golden.py --compare old/ new/               # how far each BVH's and GLB's numbers moved
+
 Runs `mocap_exaggerate.convert` (BVH, GLB, weights, manifest) on the shipped samples and, where
 present, the shared clips beside the checkout, at each preset, and records each file's SHA-256
 (the manifest without its timing and version fields). The tests' golden arrays
@@ -43,12 +47,13 @@ def _scrub(value):
     return value
 
 
-def hashes(job: tuple[str, str]) -> dict[str, str]:
+def hashes(job: tuple[str, str, str | None]) -> dict[str, str]:
     from mocap_exaggerate import convert
 
-    clip, preset = job
-    with tempfile.TemporaryDirectory() as out:
-        convert(clip, out, preset=None if preset == "default" else preset)
+    clip, preset, keep = job
+    with tempfile.TemporaryDirectory() as scratch:
+        out = Path(keep) / f"{Path(clip).parent.name}__{Path(clip).stem}__{preset}" if keep else Path(scratch)
+        convert(clip, out, preset=None if preset == "default" else preset, overwrite=True)
         result = {}
         for path in sorted(Path(out).iterdir()):
             data = path.read_bytes()
@@ -62,16 +67,74 @@ def hashes(job: tuple[str, str]) -> dict[str, str]:
         return result
 
 
+def _motion_values(path: Path):
+    import numpy as np
+
+    text = path.read_bytes()
+    body = text[text.index(b"Frame Time:"):].split(b"\n", 1)[1]
+    return np.array(body.split(), dtype=np.float64)
+
+
+def _glb_floats(path: Path):
+    """Every float accessor of a GLB, in order, as one float64 array."""
+    import numpy as np
+    import pygltflib
+
+    glb = pygltflib.GLTF2.load_binary(str(path))
+    blob = glb.binary_blob()
+    parts = []
+    for accessor in glb.accessors:
+        if accessor.componentType != pygltflib.FLOAT:
+            continue
+        view = glb.bufferViews[accessor.bufferView]
+        width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}[accessor.type]
+        start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
+        parts.append(np.frombuffer(blob, np.float32, accessor.count * width, start).astype(np.float64))
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def compare(old: Path, new: Path) -> int:
+    """How far the numbers of each BVH and GLB kept by two runs moved: values that differ, the largest move."""
+    import numpy as np
+
+    worst = {".bvh": 0.0, ".glb": 0.0}
+    counts = {".bvh": [0, 0, 0], ".glb": [0, 0, 0]}  # files that differ, values that differ, values
+    for a in sorted(old.rglob("*")):
+        b = new / a.relative_to(old)
+        if a.suffix not in worst or not b.exists() or a.read_bytes() == b.read_bytes():
+            continue
+        x, y = (_motion_values(a), _motion_values(b)) if a.suffix == ".bvh" else (_glb_floats(a), _glb_floats(b))
+        if x.shape != y.shape:
+            print(f"{a.relative_to(old)}: a different number of values ({len(x)} -> {len(y)})")
+            worst[a.suffix] = float("inf")
+            continue
+        moved = np.abs(x - y)
+        counts[a.suffix][0] += 1
+        counts[a.suffix][1] += int(np.count_nonzero(moved))
+        counts[a.suffix][2] += len(x)
+        worst[a.suffix] = max(worst[a.suffix], float(moved.max()))
+    for suffix, (files, values, total) in counts.items():
+        print(f"{suffix}: {files} files differ; in them {values:,} of {total:,} values, the largest move "
+              f"{worst[suffix]:.3g}")
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     mode = parser.add_mutually_exclusive_group(required=True)
     mode.add_argument("--write", type=Path)
     mode.add_argument("--check", type=Path)
+    mode.add_argument("--compare", type=Path, nargs=2, metavar=("OLD", "NEW"),
+                      help="two folders kept by --keep: how far each BVH's and GLB's numbers moved")
+    parser.add_argument("--keep", type=Path, help="keep every job's files in this folder")
     parser.add_argument("--data", type=Path, default=SHARED, help="the shared clips (bvh/ beside the checkout)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--presets", default=",".join(PRESETS))
     args = parser.parse_args()
-    jobs = [(str(c), p) for c in clips(args.data) for p in args.presets.split(",")]
+    if args.compare:
+        return compare(*args.compare)
+    keep = str(args.keep.resolve()) if args.keep else None
+    jobs = [(str(c), p, keep) for c in clips(args.data) for p in args.presets.split(",")]
     start = time.perf_counter()
     found: dict[str, str] = {}
     with ProcessPoolExecutor(args.jobs) as pool:

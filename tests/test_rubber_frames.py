@@ -13,7 +13,7 @@ from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.rig.skinning import Skin, reweight, subjoint_bind_positions
 from mocap_exaggerate.stages.subjoints import SubjointConfig, build_hierarchy, link_starts
 
-from .helpers import SAMPLE_DIR, all_clip_params
+from .helpers import SAMPLE_DIR, all_clip_params, assert_same_bits_or_ulps
 
 IDENTITY = {"extrapolate": {"omega": 1.0}, "correct": {"enabled": False}, "springs": {"enabled": False},
             "contacts": {"enabled": False}}
@@ -290,9 +290,11 @@ def _orient_inputs(path, preset: str):
 @pytest.mark.parametrize("preset", ["subtle", "looney"])
 @pytest.mark.parametrize("path", all_clip_params())
 def test_the_compiled_kernels_give_numpys_bits(path, preset):
-    """core/_kernels.c (forward kinematics, world to local, the frames carried along the rubber links) against the NumPy
-    code it replaces, on every clip: the same bits, so an install without a C compiler writes the same
-    bytes. (Built without fused multiply-add, each operation in NumPy's order.)"""
+    """core/_kernels.c (forward kinematics, world to local, the frames carried along the rubber links and
+    the twist spread along them) against the NumPy code it replaces, on every clip: the same bits, so an
+    install without a C compiler writes the same bytes. (Built without fused multiply-add, each operation
+    in NumPy's order; the twist's sine and cosine the C library's, which are NumPy's where it has no
+    vector loop of its own for them, as here.)"""
     from mocap_exaggerate.core import kinematics
     from mocap_exaggerate.stages.orient import curve_frames
 
@@ -301,7 +303,7 @@ def test_the_compiled_kernels_give_numpys_bits(path, preset):
     world, positions, hierarchy = _orient_inputs(path, preset)
     fast = curve_frames(world.copy(), positions, hierarchy)
     slow = curve_frames(world.copy(), positions, hierarchy, compiled=False)
-    assert np.array_equal(fast, slow)
+    assert_same_bits_or_ulps(fast, slow)  # the twist's sine and cosine are the C library's
     parents = hierarchy.skeleton.parents if len(positions[0]) == hierarchy.skeleton.num_joints else None
     parents = link_starts(hierarchy).skeleton.parents if parents is None else parents
     ours = kinematics.local_from_world(parents, fast, positions)
@@ -354,3 +356,24 @@ def test_the_compiled_kernels_are_built_where_ci_runs_and_refuse_what_they_canno
         frozen = rot.copy()
         frozen.setflags(write=False)
         kernels.chain_frames(frozen, pos, np.array([0]), np.array([1]), np.array([1]), np.zeros((1, 3)), 2, 3, 1)
+    # The twist along the links and the Euler angles read from a clip:
+    angle = np.zeros((2, 1))
+    with pytest.raises(ValueError, match="outside"):
+        kernels.twist_frames(rot.copy(), angle, np.array([1]), np.array([3]), np.zeros((1, 3)), 2, 3, 1)
+    with pytest.raises(ValueError, match="outside"):
+        kernels.twist_frames(rot.copy(), angle, np.array([-1]), np.array([1]), np.zeros((1, 3)), 2, 3, 1)
+    with pytest.raises(ValueError, match="angle"):
+        kernels.twist_frames(rot.copy(), angle[:1], np.array([0]), np.array([2]), np.zeros((1, 3)), 2, 3, 1)
+    with pytest.raises(ValueError, match="count|buffer"):
+        kernels.twist_frames(rot.copy(), angle, np.array([0]), np.array([2]), np.zeros((1, 3)), 2, 3, 2**61 + 1)
+    codes = np.array([[2, 0, 1, 1]] * 3)
+    with pytest.raises(ValueError, match="three different axes"):
+        kernels.quat_from_euler(pos, rot.copy(), np.array([[2, 0, 1, 1], [0, 0, 1, 1], [2, 0, 1, 1]]), 2, 3)
+    with pytest.raises(ValueError, match="three different axes"):
+        kernels.quat_from_euler(pos, rot.copy(), np.array([[2, 0, 1, 3]] * 3), 2, 3)
+    with pytest.raises(ValueError, match="euler"):
+        kernels.quat_from_euler(pos[:1], rot.copy(), codes, 2, 3)
+    with pytest.raises(ValueError, match="count|buffer"):
+        kernels.quat_from_euler(pos, rot.copy(), codes, 2**40, 2**40)
+    kernels.quat_from_euler(pos, rot, np.full((3, 4), -1), 2, 3)  # every joint left as it is
+    assert np.array_equal(rot, np.tile([0.0, 0, 0, 1], (2, 3, 1)))

@@ -18,6 +18,22 @@
  * chain_frames(out, positions, heads, starts, cuts, direction)
  *     out (F, J, 4) float64, read at the heads and written at starts[l] + k for k < cuts[l];
  *     positions (F, J, 3); heads, starts, cuts (L,) int64; direction (L, 3) float64.
+ * twist_frames(out, angle, starts, cuts, direction)
+ *     out (F, J, 4) float64, each sub-joint starts[l] + k (0 < k < cuts[l]) turned about its link's rest
+ *     direction by angle[f, l] k / cuts[l] (curve_frames' second pass); angle (F, L) float64.
+ * quat_from_euler(euler, out, codes)
+ *     euler (F, J, 3) degrees, out (F, J, 4); codes (J, 4) int64: the axes i, j, k of the joint's
+ *     intrinsic order and its parity (+1 or -1), or i = -1 for a joint left as it is.
+ * springs(follow, out, link_a, link_b, frame_time, substeps, stiffness, link_stiffness, damping)
+ *     the suspended particles' time loop (stages/springs.py, `_integrate_vectorised`): follow and out
+ *     (F, P, 3) float64, link_a and link_b (L,) int64 particle indices. The same operations as the NumPy
+ *     loop's, but its link forces are gathered and scattered by BLAS products, whose order of sums a C
+ *     loop cannot know: the two agree to about 1e-14 of a clip's size (tests/test_springs.py), not bit
+ *     for bit, and a BVH written either way has the same digits but for a rare last one.
+ *
+ * twist_frames and quat_from_euler call the C library's sin and cos, as NumPy does for float64 where it has no vector loop
+ * of its own (on this machine: tests/test_rubber_frames.py and tests/test_bvh.py compare the two, bit
+ * for bit where NumPy's sine is the C library's, else to the last bit).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -287,6 +303,193 @@ static PyObject *chain_frames(PyObject *self, PyObject *args) {
     return finish(views, got, bad);
 }
 
+static PyObject *twist_frames(PyObject *self, PyObject *args) {
+    PyObject *objects[5];
+    Py_ssize_t frames, joints, links;
+    if (!PyArg_ParseTuple(args, "OOOOOnnn", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4], &frames,
+                          &joints, &links))
+        return NULL;
+    if (!counts_fit(frames, joints, "twist_frames")) return NULL;
+    if (links < 0 || links > PY_SSIZE_T_MAX / 64 || (links && frames > PY_SSIZE_T_MAX / 64 / links)) {
+        PyErr_SetString(PyExc_ValueError, "twist_frames: bad link count");
+        return NULL;
+    }
+    Py_buffer views[5];
+    const Py_ssize_t counts[5] = {frames * joints * 4, frames * links, links, links, links * 3};
+    const char *names[5] = {"out", "angle", "starts", "cuts", "direction"};
+    int got = get_arrays(objects, views, "ddqqd", "wrrrr", counts, names, 5);
+    int bad = got < 5;
+    if (!bad) {
+        const int64_t *starts = (const int64_t *)views[2].buf, *cuts = (const int64_t *)views[3].buf;
+        for (Py_ssize_t l = 0; l < links && !bad; l++)
+            bad = starts[l] < 0 || starts[l] >= joints || cuts[l] < 1 || cuts[l] > joints - starts[l];
+        if (bad) PyErr_SetString(PyExc_ValueError, "twist_frames: a link's joints are outside the skeleton");
+    }
+    if (!bad) {
+        double *out = (double *)views[0].buf;
+        const double *angle = (const double *)views[1].buf, *direction = (const double *)views[4].buf;
+        const int64_t *starts = (const int64_t *)views[2].buf, *cuts = (const int64_t *)views[3].buf;
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t f = 0; f < frames; f++) {
+            double *rot = out + f * joints * 4;
+            for (Py_ssize_t l = 0; l < links; l++) {
+                const double *axis = direction + l * 3;
+                const double turn = 0.5 * angle[f * links + l];
+                for (int64_t k = 1; k < cuts[l]; k++) {
+                    /* half = 0.5 angle (k / cuts): NumPy's order, each product rounded once */
+                    const double half = turn * ((double)k / (double)cuts[l]);
+                    const double s = sin(half);
+                    const double twist[4] = {axis[0] * s, axis[1] * s, axis[2] * s, cos(half)};
+                    double *q = rot + (starts[l] + k) * 4, turned[4];
+                    quat_mul(q, twist, turned);
+                    const double size = norm4(turned);
+                    for (int i = 0; i < 4; i++) q[i] = turned[i] / size;
+                }
+            }
+        }
+        Py_END_ALLOW_THREADS
+    }
+    return finish(views, got, bad);
+}
+
+static PyObject *quat_from_euler(PyObject *self, PyObject *args) {
+    PyObject *objects[3];
+    Py_ssize_t frames, joints;
+    if (!PyArg_ParseTuple(args, "OOOnn", &objects[0], &objects[1], &objects[2], &frames, &joints)) return NULL;
+    if (!counts_fit(frames, joints, "quat_from_euler")) return NULL;
+    Py_buffer views[3];
+    const Py_ssize_t counts[3] = {frames * joints * 3, frames * joints * 4, joints * 4};
+    const char *names[3] = {"euler", "out", "codes"};
+    int got = get_arrays(objects, views, "ddq", "rwr", counts, names, 3);
+    int bad = got < 3;
+    if (!bad) {
+        const int64_t *codes = (const int64_t *)views[2].buf;
+        for (Py_ssize_t j = 0; j < joints && !bad; j++) {
+            const int64_t *c = codes + j * 4;
+            if (c[0] == -1) continue;
+            bad = c[0] < 0 || c[0] > 2 || c[1] < 0 || c[1] > 2 || c[2] < 0 || c[2] > 2 || c[0] == c[1] ||
+                  c[1] == c[2] || c[0] == c[2] || (c[3] != 1 && c[3] != -1);
+        }
+        if (bad) PyErr_SetString(PyExc_ValueError, "quat_from_euler: a joint's order is not three different axes");
+    }
+    if (!bad) {
+        const double *euler = (const double *)views[0].buf;
+        double *out = (double *)views[1].buf;
+        const int64_t *codes = (const int64_t *)views[2].buf;
+        const double to_radians = M_PI / 180.0; /* np.deg2rad: x * (pi / 180) */
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t f = 0; f < frames; f++) {
+            for (Py_ssize_t j = 0; j < joints; j++) {
+                const int64_t *code = codes + j * 4;
+                if (code[0] == -1) continue;
+                const double *e = euler + (f * joints + j) * 3;
+                double c[3], s[3];
+                for (int a = 0; a < 3; a++) {
+                    const double half = 0.5 * (e[a] * to_radians);
+                    c[a] = cos(half);
+                    s[a] = sin(half);
+                }
+                const double parity = (double)code[3];
+                const double c1c2 = c[0] * c[1], s1s2 = s[0] * s[1], c1s2 = c[0] * s[1], s1c2 = s[0] * c[1];
+                double *q = out + (f * joints + j) * 4;
+                q[code[0]] = s1c2 * c[2] + parity * c1s2 * s[2];
+                q[code[1]] = c1s2 * c[2] - parity * s1c2 * s[2];
+                q[code[2]] = c1c2 * s[2] + parity * s1s2 * c[2];
+                q[3] = c1c2 * c[2] - parity * s1s2 * s[2];
+            }
+        }
+        Py_END_ALLOW_THREADS
+    }
+    return finish(views, got, bad);
+}
+
+static PyObject *springs(PyObject *self, PyObject *args) {
+    PyObject *objects[4];
+    Py_ssize_t frames, count, links, substeps;
+    double frame_time, stiffness, link_stiffness, damping;
+    if (!PyArg_ParseTuple(args, "OOOOnnndnddd", &objects[0], &objects[1], &objects[2], &objects[3], &frames, &count,
+                          &links, &frame_time, &substeps, &stiffness, &link_stiffness, &damping))
+        return NULL;
+    if (!counts_fit(frames, count, "springs")) return NULL;
+    if (links < 0 || links > PY_SSIZE_T_MAX / 64 || substeps < 1 || substeps > 1000000 || !(frame_time > 0.0) ||
+        !isfinite(frame_time) || !isfinite(stiffness) || !isfinite(link_stiffness) || !isfinite(damping)) {
+        PyErr_SetString(PyExc_ValueError, "springs: bad link count, substeps or constants");
+        return NULL;
+    }
+    Py_buffer views[4];
+    const Py_ssize_t counts[4] = {frames * count * 3, frames * count * 3, links, links};
+    const char *names[4] = {"follow", "out", "link_a", "link_b"};
+    int got = get_arrays(objects, views, "ddqq", "rwrr", counts, names, 4);
+    int bad = got < 4;
+    if (!bad) {
+        const int64_t *a = (const int64_t *)views[2].buf, *b = (const int64_t *)views[3].buf;
+        for (Py_ssize_t l = 0; l < links && !bad; l++) bad = a[l] < 0 || a[l] >= count || b[l] < 0 || b[l] >= count;
+        if (bad) PyErr_SetString(PyExc_ValueError, "springs: a link's particles are outside the set");
+    }
+    double *work = NULL;
+    if (!bad && frames >= 2) {
+        work = (double *)PyMem_RawMalloc(sizeof(double) * (size_t)(count * 9 + links));
+        if (work == NULL) {
+            PyErr_NoMemory();
+            bad = 1;
+        }
+    }
+    if (!bad && frames >= 2) {
+        const double *follow = (const double *)views[0].buf;
+        double *out = (double *)views[1].buf;
+        const int64_t *link_a = (const int64_t *)views[2].buf, *link_b = (const int64_t *)views[3].buf;
+        double *x = work, *v = work + count * 3, *anchor = work + count * 6, *rest = work + count * 9;
+        const Py_ssize_t n = count * 3;
+        Py_BEGIN_ALLOW_THREADS
+        const double h = frame_time / (double)substeps;
+        const double denominator = 1.0 + h * damping + h * h * stiffness;
+        const double strength = h * link_stiffness / denominator, pull = h * stiffness / denominator;
+        const double shrink = 1.0 / denominator;
+        const double anchor_pull = h * stiffness, drag = h * damping / frame_time;
+        memcpy(out, follow, sizeof(double) * (size_t)n);
+        memcpy(x, follow, sizeof(double) * (size_t)n);
+        for (Py_ssize_t i = 0; i < n; i++) v[i] = (follow[n + i] - follow[i]) / frame_time;
+        for (Py_ssize_t f = 0; f + 1 < frames; f++) {
+            const double *now = follow + f * n, *next = now + n;
+            for (Py_ssize_t k = 1; k <= substeps; k++) {
+                const double alpha = (double)k / (double)substeps;
+                /* v' = (v + h (k (anchor - x) + c u + F)) / d, x' = x + h v' */
+                for (Py_ssize_t i = 0; i < n; i++) {
+                    const double step = next[i] - now[i];
+                    anchor[i] = now[i] + alpha * step;
+                    const double push = (anchor_pull * anchor[i] + drag * step) / denominator;
+                    v[i] = v[i] * shrink + push - pull * x[i];
+                }
+                for (Py_ssize_t l = 0; l < links; l++) {
+                    const double *pa = anchor + link_a[l] * 3, *pb = anchor + link_b[l] * 3;
+                    const double r[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
+                    rest[l] = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+                }
+                for (Py_ssize_t l = 0; l < links; l++) {
+                    double *va = v + link_a[l] * 3, *vb = v + link_b[l] * 3;
+                    const double *xa = x + link_a[l] * 3, *xb = x + link_b[l] * 3;
+                    const double e[3] = {xb[0] - xa[0], xb[1] - xa[1], xb[2] - xa[2]};
+                    const double length = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+                    /* 1 - rest / length; a collapsed link (length 0) has e = 0 and pulls with nothing */
+                    const double scale = 1.0 - rest[l] / (length > 1e-300 ? length : 1e-300);
+                    for (int c = 0; c < 3; c++) {
+                        const double pulled = strength * (scale * e[c]);
+                        va[c] += pulled;
+                        vb[c] -= pulled;
+                    }
+                }
+                for (Py_ssize_t i = 0; i < n; i++) x[i] = x[i] + h * v[i];
+            }
+            memcpy(out + (f + 1) * n, x, sizeof(double) * (size_t)n);
+        }
+        Py_END_ALLOW_THREADS
+    } else if (!bad && frames == 1) {
+        memcpy(views[1].buf, views[0].buf, sizeof(double) * (size_t)(count * 3));
+    }
+    PyMem_RawFree(work);
+    return finish(views, got, bad);
+}
+
 static PyMethodDef methods[] = {
     {"local_from_world", local_from_world, METH_VARARGS,
      "local_from_world(parents, world_rot, world_pos, local_rot, local_pos, frames, joints): world to local."},
@@ -294,6 +497,13 @@ static PyMethodDef methods[] = {
      "forward_kinematics(parents, rot, pos, frames, joints): joint-major local to world, in place."},
     {"chain_frames", chain_frames, METH_VARARGS,
      "chain_frames(out, positions, heads, starts, cuts, direction, frames, joints, links): frames along links."},
+    {"twist_frames", twist_frames, METH_VARARGS,
+     "twist_frames(out, angle, starts, cuts, direction, frames, joints, links): twist spread along links."},
+    {"quat_from_euler", quat_from_euler, METH_VARARGS,
+     "quat_from_euler(euler, out, codes, frames, joints): intrinsic Euler angles in degrees to quaternions."},
+    {"springs", springs, METH_VARARGS,
+     "springs(follow, out, link_a, link_b, frames, particles, links, frame_time, substeps, stiffness, "
+     "link_stiffness, damping): the suspended particles' time loop."},
     {NULL, NULL, 0, NULL},
 };
 

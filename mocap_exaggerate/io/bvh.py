@@ -31,7 +31,7 @@ import numpy as np
 
 from ..core.errors import InputError, check_choice
 from ..core.motion import Motion
-from ..core.rotations import euler_blocks, quat_from_euler
+from ..core.rotations import euler_blocks, quat_from_joint_euler
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .files import atomic_write, write_all
 
@@ -572,10 +572,9 @@ def _motion_from_channels(skeleton: Skeleton, values: np.ndarray, frame_time: fl
     adds = skeleton.positions == "add"
     euler = np.zeros((frames, joints, 3))
     column = 0
-    by_order: dict[str, list[int]] = {}
+    orders = [skeleton.rotation_order(j) for j in range(joints)]
     for j, names in enumerate(skeleton.channels):
-        order = skeleton.rotation_order(j)
-        by_order.setdefault(order, []).append(j)
+        order = orders[j]
         for name in names:
             axis = "XYZ".index(name[0])
             if name in POSITION_CHANNELS:
@@ -583,10 +582,7 @@ def _motion_from_channels(skeleton: Skeleton, values: np.ndarray, frame_time: fl
             else:
                 euler[:, j, order.index(name[0])] = values[:, column]
             column += 1
-    local_rot = np.empty((frames, joints, 4))
-    for order, members in by_order.items():
-        local_rot[:, members] = quat_from_euler(euler[:, members], order)
-    return Motion(skeleton, frame_time, local_rot, local_pos, euler)
+    return Motion(skeleton, frame_time, quat_from_joint_euler(euler, orders), local_pos, euler)
 
 
 # ---------------------------------------------------------------------------- writing

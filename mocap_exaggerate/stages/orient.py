@@ -246,8 +246,8 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
     place. Where that twist is ill-defined (the end's frame folds the last
     sub-link back past 120 degrees) or near half a turn, it fades out
     smoothly, and it is eased over a frame either way, so every frame follows
-    from its neighbours. ``compiled``: the frames carried along the links by
-    ``core/_kernels.c`` where it was built (the same bits, half the stage's time).
+    from its neighbours. ``compiled``: the frames carried along the links and the twist spread
+    along them by ``core/_kernels.c`` where it was built (the same bits, a third of the time).
     """
     sub = hierarchy.skeleton
     out = np.empty(positions.shape[:2] + (4,))
@@ -295,6 +295,10 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
         angle[part] = twisted * (smootherstep((fold - _FOLDED) / (_UNFOLDED - _FOLDED))
                                  * smootherstep((np.pi - np.abs(twisted)) / (np.pi - _TWIST_FADE)))
     angle = gaussian_average(angle, 1.0, ends="nearest")  # where the fades pass quickly, over a few frames
+    if kernel:
+        _kernels.twist_frames(out, np.ascontiguousarray(angle), starts.astype(np.int64), cuts.astype(np.int64),
+                              np.ascontiguousarray(direction, dtype=np.float64), *out.shape[:2], len(starts))
+        return out
     for part in cache_blocks(len(out), len(starts)):
         for k, (on, joint) in enumerate(steps[1:], start=1):
             # A turn about the sub-link is a turn about the rest direction in the bone's own frame.
