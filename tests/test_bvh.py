@@ -237,6 +237,79 @@ def test_the_compiled_formatter_refuses_what_it_cannot_write():
     assert bvh.format_fixed(edge) == ((" ".join(["-1000000000.000000"] * 50) + "\n") * 2000).encode()
 
 
+def _both_readers(block: bytes, channels: int, declared: int):
+    """``_parse_motion`` on ``block`` by io/_formatting.c and by NumPy: (values or error, lines, warnings) each."""
+    from mocap_exaggerate.io import bvh
+
+    results = []
+    for compiled in (True, False):
+        report = bvh.BVHReport(source="x")
+        try:
+            values = bvh._parse_motion(block, channels, declared, first_line=5, label="x", report=report,
+                                       compiled=compiled).tobytes()
+        except InputError as error:
+            values = str(error)
+        results.append((values, report.data_lines, report.warnings))
+    return results
+
+
+def test_the_compiled_reader_gives_numpys_values_for_every_way_of_writing_a_number():
+    """Every number is the double nearest its text, as NumPy's strtod reads it: short decimals (one IEEE
+    quotient), long mantissas, large and tiny powers of ten, signed zeros, subnormals, the edge of the
+    range; and every fault (a word, a hex number, a value past 1e9, a short line) is named as before."""
+    from mocap_exaggerate.io import bvh
+
+    if bvh._compiled is None:
+        pytest.skip("io/_formatting.c was not built")
+    rng = np.random.default_rng(31)
+    words = ["0", "-0", "+0.000", "-0.0e5", ".5", "5.", "-.25E-3", "1e-22", "1e-23", "9007199254740993e-10",
+             "12345678901234567890123e-20", "1e8", "100000000.000000000000001",
+             "0.1000000000000000055511151231257827", "1e-320", "-4.9e-324",
+             "999999999.99999999", "1000000000", "-1e9", "00012.50", "1.7976931348623157e-300", "3.14159265358979323846",
+             "123456.789012", "-0.000001", "2.2250738585072014e-308", "1E+08", "7e-0", "0e999999"]
+    words += [f"{v:.{d}f}" for v, d in zip(rng.uniform(-2e3, 2e3, 400), rng.integers(0, 12, 400))]
+    words += [f"{v:.{d}e}" for v, d in zip(rng.uniform(-1e9, 1e9, 200) * 10.0 ** rng.integers(-30, 0, 200),
+                                            rng.integers(0, 20, 200))]
+    words += [repr(float(v)) for v in rng.normal(0, 100, 200)]
+    rng.shuffle(words)
+    rows = [words[k:k + 6] for k in range(0, len(words) - len(words) % 6, 6)]
+    for end in ("\n", "\r\n"):
+        block = ("\t".join(rows[0]) + end + end.join(" \x0b ".join(row) + "  " for row in rows[1:])).encode()
+        ours, theirs = _both_readers(block, 6, len(rows))
+        assert ours == theirs and isinstance(ours[0], bytes)
+    # More lines than declared (a warning), blank lines between, no LF at the end:
+    block = b"\n\n1 2 3\n   \n4 5 6\n7 8 9"
+    assert _both_readers(block, 3, 2)[0] == _both_readers(block, 3, 2)[1]
+    assert _both_readers(block, 3, 2)[0][2] and _both_readers(block, 3, 2)[0][1] == 3
+    for bad in (b"1 2 x\n4 5 6\n", b"1 2 0x10\n4 5 6\n", b"1 2 nan\n4 5 6\n", b"1 2 inf\n4 5 6\n", b"1 2 1e10\n4 5 6\n",
+                b"1 2 3\n4 5\n", b"1 2 3 4\n4 5 6\n", b"1 2 3\n", b"1 2 3e\n4 5 6\n", b"1 2 .\n4 5 6\n",
+                b"1 2 3-\n4 5 6\n", b"1 2 1e99999\n4 5 6\n", b"1 2 1_0\n4 5 6\n", b"1 2 3\x00\n4 5 6\n"):
+        ours, theirs = _both_readers(bad, 3, 2)
+        assert ours == theirs and isinstance(ours[0], str), bad
+    # A header declaring far more than the block holds: named, nothing the size of its claim allocated.
+    ours, theirs = _both_readers(b"1 2 3\n", 3, 400_000)
+    assert ours == theirs and "only 1 complete motion lines" in ours[0]
+    with pytest.raises(ValueError, match="declared"):
+        bvh._compiled.parse_motion(b"1 2 3\n", np.empty(2), 3, 1, 1e9)
+    with pytest.raises(TypeError):  # only bytes: its closing NUL ends the last number
+        bvh._compiled.parse_motion(bytearray(b"1 2 3\n"), np.empty(3), 3, 1, 1e9)
+
+
+@pytest.mark.parametrize("path", all_clip_params())
+def test_both_readers_read_every_clip_alike(path):
+    from mocap_exaggerate.io import bvh
+
+    if bvh._compiled is None:
+        pytest.skip("io/_formatting.c was not built")
+    data = path.read_bytes()
+    start = data.index(b"Frame Time:")
+    block = data[data.index(b"\n", start) + 1:]
+    declared = int(re.search(rb"Frames:\s*(\d+)", data).group(1))
+    channels = sum(int(n) for n in re.findall(rb"CHANNELS\s+(\d+)", data[:start]))
+    ours, theirs = _both_readers(block, channels, declared)
+    assert ours == theirs and isinstance(ours[0], bytes)
+
+
 def test_both_formatters_write_a_whole_clip_alike(sample_clip):
     from mocap_exaggerate.io import bvh
 

@@ -1,4 +1,4 @@
-/* Fixed-point text for BVH motion lines: the one loop NumPy cannot make fast.
+/* Fixed-point text for BVH motion lines, and the motion lines read back: the loops NumPy cannot make fast.
  *
  * format_fixed(values, rows, cols, decimals) -> bytes, where values is a C-contiguous
  * buffer of rows * cols native float64 (its format is checked). Each number is rounded as NumPy's np.rint(abs(v) * 10**decimals)
@@ -6,8 +6,19 @@
  * no minus sign on a zero, numbers separated by one space, rows by one LF, and a final LF.
  * Magnitudes of 1e9 or more are the caller's (io/bvh.py formats them in Python).
  *
- * Optional: io/bvh.py falls back to its NumPy formatter when this module was not built, and
- * the tests check that both write the same bytes.
+ * parse_motion(block, out, channels, declared, largest) -> the number of lines with values, or -1.
+ * block is bytes (the text after 'Frame Time:'), out a writable buffer of declared * channels float64.
+ * Lines end at LF; values are separated by any of TAB LF VT FF CR SPACE. When the first `declared` lines
+ * with values each hold `channels` numbers written as BVH exporters write them ([+-] digits [. digits]
+ * [e [+-] digits]) of magnitude at most `largest`, their values fill out and the count of every line with
+ * values is returned; else -1, and io/bvh.py reads the block with NumPy, which finds and names the fault.
+ * A number of at most 19 significant digits whose power of ten is within 22 is one IEEE product or
+ * quotient of two exact doubles (Clinger's fast path), so correctly rounded; any other goes to Python's
+ * own correctly rounded PyOS_string_to_double. So every value is the double nearest the text, as NumPy's
+ * strtod makes it (the tests compare both on every clip).
+ *
+ * Optional: io/bvh.py falls back to its NumPy code when this module was not built, and the tests check
+ * that both give the same bytes and values.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -123,9 +134,142 @@ static PyObject *format_fixed(PyObject *self, PyObject *args) {
     return result;
 }
 
+static const double POWERS_OF_TEN[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
+                                         1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+
+static inline int is_space(unsigned char c) { return c == ' ' || (c >= 9 && c <= 13); }
+
+/* The number in [at, end) (a whole token), or 0 when it is not written as BVH exporters write numbers. */
+static int parse_number(const char *at, const char *end, double *value) {
+    const char *p = at;
+    int negative = 0;
+    if (p < end && (*p == '+' || *p == '-')) negative = *p++ == '-';
+    uint64_t mantissa = 0;
+    int significant = 0, dropped = 0, scale = 0, any = 0;
+    while (p < end && *p >= '0' && *p <= '9') { /* whole part */
+        any = 1;
+        if (mantissa == 0 && *p == '0') {
+            p++;
+            continue;
+        }
+        if (significant < 19) {
+            mantissa = mantissa * 10 + (uint64_t)(*p - '0');
+            significant++;
+        } else {
+            dropped = 1;
+            scale++;
+        }
+        p++;
+    }
+    if (p < end && *p == '.') {
+        p++;
+        while (p < end && *p >= '0' && *p <= '9') {
+            any = 1;
+            if (mantissa == 0 && *p == '0') {
+                scale--;
+            } else if (significant < 19) {
+                mantissa = mantissa * 10 + (uint64_t)(*p - '0');
+                significant++;
+                scale--;
+            } else {
+                dropped = 1;
+            }
+            p++;
+        }
+    }
+    if (!any) return 0;
+    if (p < end && (*p == 'e' || *p == 'E')) {
+        p++;
+        int minus = 0;
+        if (p < end && (*p == '+' || *p == '-')) minus = *p++ == '-';
+        if (p >= end || *p < '0' || *p > '9') return 0;
+        long exponent = 0;
+        while (p < end && *p >= '0' && *p <= '9') {
+            if (exponent < 100000) exponent = exponent * 10 + (*p - '0');
+            p++;
+        }
+        scale += (int)(minus ? -exponent : exponent);
+    }
+    if (p != end) return 0;
+    double result;
+    if (mantissa == 0) {
+        result = 0.0;
+    } else if (!dropped && mantissa <= (UINT64_C(1) << 53) && scale >= -22 && scale <= 22) {
+        /* both exact doubles: one rounding */
+        result = scale < 0 ? (double)mantissa / POWERS_OF_TEN[-scale] : (double)mantissa * POWERS_OF_TEN[scale];
+    } else {
+        /* the text itself, by Python's correctly rounded reader (the token is followed by a space, LF or the
+         * bytes object's closing NUL, none of which a number takes) */
+        char *stop = NULL;
+        result = PyOS_string_to_double(at, &stop, NULL);
+        if (result == -1.0 && PyErr_Occurred()) {
+            PyErr_Clear();
+            return 0;
+        }
+        if (stop != end) return 0;
+        *value = result;
+        return 1;
+    }
+    *value = negative ? -result : result;
+    return 1;
+}
+
+static PyObject *parse_motion(PyObject *self, PyObject *args) {
+    Py_buffer out;
+    PyObject *block;
+    Py_ssize_t channels, declared;
+    double largest;
+    if (!PyArg_ParseTuple(args, "Sw*nnd", &block, &out, &channels, &declared, &largest)) return NULL;
+    if (channels < 1 || declared < 1 || declared > PY_SSIZE_T_MAX / 8 / channels ||
+        out.len != declared * channels * (Py_ssize_t)sizeof(double)) {
+        PyBuffer_Release(&out);
+        PyErr_SetString(PyExc_ValueError, "parse_motion: out must hold declared * channels float64");
+        return NULL;
+    }
+    const char *at = PyBytes_AS_STRING(block), *end = at + PyBytes_GET_SIZE(block);
+    double *values = (double *)out.buf;
+    Py_ssize_t lines = 0, filled = 0;
+    int fits = 1;
+    while (at < end && fits) {
+        const char *line_end = memchr(at, '\n', (size_t)(end - at));
+        if (line_end == NULL) line_end = end;
+        Py_ssize_t count = 0;
+        if (lines < declared) {
+            const char *p = at;
+            while (p < line_end) {
+                while (p < line_end && is_space((unsigned char)*p)) p++;
+                if (p >= line_end) break;
+                const char *token = p;
+                while (p < line_end && !is_space((unsigned char)*p)) p++;
+                double value;
+                if (count >= channels || !parse_number(token, p, &value) || !(fabs(value) <= largest)) {
+                    fits = 0;
+                    break;
+                }
+                values[filled + count++] = value;
+            }
+            if (fits && count > 0 && count != channels) fits = 0;
+            filled += count;
+        } else { /* past the lines read: only whether it has values */
+            for (const char *p = at; p < line_end; p++)
+                if (!is_space((unsigned char)*p)) {
+                    count = 1;
+                    break;
+                }
+        }
+        lines += count > 0;
+        at = line_end + 1;
+    }
+    PyBuffer_Release(&out);
+    if (!fits || lines < declared) return PyLong_FromLong(-1);
+    return PyLong_FromSsize_t(lines);
+}
+
 static PyMethodDef methods[] = {
     {"format_fixed", format_fixed, METH_VARARGS,
      "format_fixed(values, rows, cols, decimals) -> bytes: fixed-point rows of float64 numbers."},
+    {"parse_motion", parse_motion, METH_VARARGS,
+     "parse_motion(block, out, channels, declared, largest) -> lines with values, or -1: BVH motion lines."},
     {NULL, NULL, 0, NULL},
 };
 

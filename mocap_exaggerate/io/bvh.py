@@ -42,6 +42,11 @@ log = logging.getLogger(__name__)
 
 _CHANNEL_NAMES = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
 
+try:  # optional: setup.py builds it where there is a C compiler (the motion lines read and written)
+    from . import _formatting as _compiled
+except ImportError:  # pragma: no cover - the NumPy code reads the same values and writes the same bytes
+    _compiled = None
+
 _WHITESPACE = np.zeros(256, dtype=bool)
 _WHITESPACE[[9, 10, 11, 12, 13, 32]] = True
 
@@ -489,9 +494,26 @@ def _parse_header(text: str, label: str) -> Skeleton:
 
 
 def _parse_motion(
-    block: bytes, num_channels: int, declared: int, *, first_line: int, label: str, report: BVHReport
+    block: bytes, num_channels: int, declared: int, *, first_line: int, label: str, report: BVHReport,
+    compiled: bool = True,
 ) -> np.ndarray:
-    """Frame values ``(F, C)`` from the bytes after ``Frame Time:``."""
+    """Frame values ``(F, C)`` from the bytes after ``Frame Time:``.
+
+    ``compiled``: a well-formed block is read in one pass by ``io/_formatting.c`` where it was built (the
+    same values; a third of the time); a block it does not take as it is, and every fault, the NumPy code
+    below reads and names.
+    """
+    # (Each value takes two bytes at least, a digit and a space or LF: a header that declares more than
+    # the block can hold is left to the NumPy code, which says so before it allocates anything.)
+    if compiled and _compiled is not None and 0 < declared * num_channels <= (len(block) + 1) // 2:
+        values = np.empty(declared * num_channels)
+        lines = _compiled.parse_motion(block, values, num_channels, declared, MAX_VALUE)
+        if lines >= declared:
+            report.data_lines = lines
+            if lines > declared:
+                report.warnings.append(
+                    f"'Frames: {declared}' but {lines} motion lines follow; reading the first {declared}")
+            return values.reshape(declared, num_channels)
     buf = np.frombuffer(block, dtype=np.uint8)
     space = _WHITESPACE[buf]
     # Where each value starts, and which line that is on: positions, not per-byte arrays.
@@ -684,10 +706,6 @@ def _format_header(motion: Motion) -> str:
 
 
 _BLOCK_FRAMES = 1024
-try:  # optional: setup.py builds it where there is a C compiler
-    from . import _formatting as _compiled
-except ImportError:  # pragma: no cover - the NumPy formatter writes the same bytes
-    _compiled = None
 #: Beyond this magnitude micro-units no longer fit float64 exactly; such rows use Python's formatting.
 _FAST_LIMIT = 1e9
 
