@@ -119,6 +119,13 @@ def test_euler_blocks_are_the_whole_clips_angles_bit_for_bit(order, block):
     # A joint locked throughout: its third angle is 0, its first carries the whole turn.
     assert np.all(whole[:, -1, 2] == 0.0)
     assert np.max(quat_angle(quat_from_euler(whole, order), q)) < 1e-6
+    # The choice of solution and whole turns made frame after frame in core/_kernels.c: NumPy's bits,
+    # whole clips and blocks, all joints and some.
+    if rotations._kernels is not None:
+        numpy_whole = np.concatenate(list(euler_blocks(q, order, block=len(q), compiled=False)))
+        assert numpy_whole.view(np.int64).tolist() == whole.view(np.int64).tolist()
+        numpy_picked = np.concatenate(list(euler_blocks(q, order, block=block, columns=[3, 0], compiled=False)))
+        assert numpy_picked.view(np.int64).tolist() == picked.view(np.int64).tolist()
 
 
 def test_unroll_makes_neighbours_same_hemisphere():

@@ -375,5 +375,12 @@ def test_the_compiled_kernels_are_built_where_ci_runs_and_refuse_what_they_canno
         kernels.quat_from_euler(pos[:1], rot.copy(), codes, 2, 3)
     with pytest.raises(ValueError, match="count|buffer"):
         kernels.quat_from_euler(pos, rot.copy(), codes, 2**40, 2**40)
+    carried = (np.zeros((3, 3)), np.zeros(3, np.int64), np.zeros((3, 3)), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="parity"):
+        kernels.euler_continuity(pos.copy(), carried[0], np.zeros(3), *carried[2:], 2, 3, False)
+    with pytest.raises(ValueError, match="first"):
+        kernels.euler_continuity(pos[:1].copy(), *carried, 2, 3, False)
+    with pytest.raises(ValueError, match="count|buffer"):
+        kernels.euler_continuity(pos.copy(), *carried, 2**40, 2**40, False)
     kernels.quat_from_euler(pos, rot, np.full((3, 4), -1), 2, 3)  # every joint left as it is
     assert np.array_equal(rot, np.tile([0.0, 0, 0, 1], (2, 3, 1)))

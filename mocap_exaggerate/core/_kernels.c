@@ -24,6 +24,11 @@
  * quat_from_euler(euler, out, codes)
  *     euler (F, J, 3) degrees, out (F, J, 4); codes (J, 4) int64: the axes i, j, k of the joint's
  *     intrinsic order and its parity (+1 or -1), or i = -1 for a joint left as it is.
+ * euler_continuity(first, previous, parity, turns, last, started)
+ *     euler_blocks' choice between each frame's two Euler solutions and its whole turns, for a block of
+ *     frames: first (n, M, 3) float64 the first solutions, overwritten by the angles chosen; previous,
+ *     turns and last (M, 3) float64 and parity (M,) int64 what the blocks before carried (read when
+ *     started is 1), updated for the next. Only +, -, *, / and rint (NumPy's round), so NumPy's bits.
  * springs(follow, out, link_a, link_b, frame_time, substeps, stiffness, link_stiffness, damping)
  *     the suspended particles' time loop (stages/springs.py, `_integrate_vectorised`): follow and out
  *     (F, P, 3) float64, link_a and link_b (L,) int64 particle indices. The same operations as the NumPy
@@ -403,6 +408,65 @@ static PyObject *quat_from_euler(PyObject *self, PyObject *args) {
     return finish(views, got, bad);
 }
 
+/* np.round(x): half to even, as rint in the default rounding mode */
+static inline double wrap_near(double angle, double reference) {
+    return angle + 360.0 * rint((reference - angle) / 360.0);
+}
+
+static inline double distance3(const double *a, const double *reference) {
+    return (fabs(wrap_near(a[0], reference[0]) - reference[0]) + fabs(wrap_near(a[1], reference[1]) - reference[1])) +
+           fabs(wrap_near(a[2], reference[2]) - reference[2]);
+}
+
+static PyObject *euler_continuity(PyObject *self, PyObject *args) {
+    PyObject *objects[5];
+    Py_ssize_t frames, width;
+    int started;
+    if (!PyArg_ParseTuple(args, "OOOOOnnp", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4], &frames,
+                          &width, &started))
+        return NULL;
+    if (!counts_fit(frames, width, "euler_continuity")) return NULL;
+    Py_buffer views[5];
+    const Py_ssize_t counts[5] = {frames * width * 3, width * 3, width, width * 3, width * 3};
+    const char *names[5] = {"first", "previous", "parity", "turns", "last"};
+    int got = get_arrays(objects, views, "ddqdd", "wwwww", counts, names, 5);
+    int bad = got < 5;
+    if (!bad && frames > 0) {
+        double *angles = (double *)views[0].buf, *previous = (double *)views[1].buf;
+        int64_t *parity = (int64_t *)views[2].buf;
+        double *turns = (double *)views[3].buf, *last = (double *)views[4].buf;
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t m = 0; m < width; m++) {
+            double before[3], chosen_before[3], turn[3];
+            int64_t flips = parity[m];
+            memcpy(before, previous + m * 3, sizeof(before));
+            memcpy(chosen_before, last + m * 3, sizeof(chosen_before));
+            memcpy(turn, turns + m * 3, sizeof(turn));
+            for (Py_ssize_t t = 0; t < frames; t++) {
+                double *angle = angles + (t * width + m) * 3;
+                const double first[3] = {angle[0], angle[1], angle[2]};
+                const double second[3] = {first[0] + 180.0, 180.0 - first[1], first[2] + 180.0};
+                const int opening = t == 0 && !started; /* the clip's first frame: nothing before it */
+                /* flip to the other solution where it is nearer the previous frame's first one */
+                if (!opening && distance3(second, before) < distance3(first, before)) flips++;
+                const double *chosen = flips % 2 == 1 ? second : first;
+                for (int c = 0; c < 3; c++) {
+                    if (!opening) turn[c] += rint((chosen[c] - chosen_before[c]) / 360.0);
+                    chosen_before[c] = chosen[c];
+                    before[c] = first[c];
+                }
+                for (int c = 0; c < 3; c++) angle[c] = chosen_before[c] - 360.0 * turn[c];
+            }
+            memcpy(previous + m * 3, before, sizeof(before));
+            memcpy(last + m * 3, chosen_before, sizeof(chosen_before));
+            memcpy(turns + m * 3, turn, sizeof(turn));
+            parity[m] = flips;
+        }
+        Py_END_ALLOW_THREADS
+    }
+    return finish(views, got, bad);
+}
+
 static PyObject *springs(PyObject *self, PyObject *args) {
     PyObject *objects[4];
     Py_ssize_t frames, count, links, substeps;
@@ -501,6 +565,8 @@ static PyMethodDef methods[] = {
      "twist_frames(out, angle, starts, cuts, direction, frames, joints, links): twist spread along links."},
     {"quat_from_euler", quat_from_euler, METH_VARARGS,
      "quat_from_euler(euler, out, codes, frames, joints): intrinsic Euler angles in degrees to quaternions."},
+    {"euler_continuity", euler_continuity, METH_VARARGS,
+     "euler_continuity(first, previous, parity, turns, last, frames, width, started): Euler angles made continuous."},
     {"springs", springs, METH_VARARGS,
      "springs(follow, out, link_a, link_b, frames, particles, links, frame_time, substeps, stiffness, "
      "link_stiffness, damping): the suspended particles' time loop."},

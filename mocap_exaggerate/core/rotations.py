@@ -416,7 +416,7 @@ def quat_to_euler(
 
 
 def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None, block: int = 1024,
-                 columns: np.ndarray | None = None):
+                 columns: np.ndarray | None = None, *, compiled: bool = True):
     """`quat_to_euler` of ``q (F, ..., 4)`` as consecutive blocks of ``block`` frames, each ``(n, ..., 3)``.
 
     The same numbers as on the whole clip at once, bit for bit: what one frame's
@@ -432,6 +432,8 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
         with ``columns`` (each block takes the columns' share)
     columns : for ``q (F, J, 4)``, the joints to convert (default all), taken from
         each block as it comes (no copy of the clip's rotations)
+    compiled : without a reference, the choice of solution and whole turns made frame after frame
+        by ``core/_kernels.c`` where it was built (the same bits: +, -, *, / and NumPy's rounding)
     """
     q = np.asarray(q, dtype=np.float64)
     frames = q.shape[0]
@@ -456,6 +458,9 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
     last_chosen = None  # the previous frame's pick before whole turns, (M, 3)
     last_third = np.full(width, np.nan)  # the third angle of the last frame not at gimbal lock
     ahead = _LookAhead(flat, order, source_columns, block)
+    kernel = compiled and _kernels is not None and reference is None
+    if kernel:  # what the blocks carry, as the kernel keeps it (previous, parity, turns_so_far, last_chosen)
+        carried = (np.zeros((width, 3)), parity, turns_so_far, np.zeros((width, 3)))
     for start in range(0, frames, block):
         part = slice(start, min(start + block, frames))
         qs = flat[part][:, pick]
@@ -478,6 +483,11 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
             if len(unlocked):
                 at = len(locked) - 1 - np.argmax(~locked[::-1, unlocked], axis=0)
                 last_third[unlocked] = first[at, unlocked, 2]
+        if kernel:
+            first = np.ascontiguousarray(first).reshape(len(qs), width, 3)
+            _kernels.euler_continuity(first, *carried, len(qs), width, start > 0)
+            yield first.reshape(qs.shape[:1] + lead[1:] + (3,))
+            continue
         second = first + np.array([180.0, 0.0, 180.0])
         second[..., 1] = 180.0 - first[..., 1]
         if reference is not None:
