@@ -843,6 +843,42 @@ def test_a_clip_over_the_size_limit_is_refused_before_it_is_read(monkeypatch):
     assert files.read_stream(io.BytesIO(b"x" * 100), limit=100, what="clip", label="<stdin>") == b"x" * 100
 
 
+def test_a_stream_is_read_a_piece_at_a_time_never_asked_for_the_whole_limit(monkeypatch, tmp_path):
+    """Asked for 1 GiB at once, a stream makes a 1 GiB buffer before it reads a byte (a MemoryError where
+    memory is not overcommitted, for every clip): a file is asked for its size and one byte more, a pipe
+    for pieces of READ_PIECE, and what they hold is read whole, however the pieces fall."""
+    import io
+
+    from mocap_exaggerate.core.errors import InputError
+    from mocap_exaggerate.io import files
+
+    class Pipe(io.RawIOBase):  # gives at most 7 bytes a read, as a pipe gives what it has
+        def __init__(self, data: bytes) -> None:
+            self.data, self.asked = data, []
+
+        def readable(self) -> bool:
+            return True
+
+        def read(self, size: int = -1) -> bytes:
+            self.asked.append(size)
+            piece, self.data = self.data[:min(size, 7)], self.data[min(size, 7):]
+            return piece
+
+    monkeypatch.setattr(files, "READ_PIECE", 10)
+    pipe = Pipe(bytes(range(95)))
+    assert files.read_stream(pipe, limit=100, what="clip", label="<stdin>") == bytes(range(95))
+    assert max(pipe.asked) <= 11
+    with pytest.raises(InputError, match="is over"):
+        files.read_stream(Pipe(b"x" * 101), limit=100, what="clip", label="<stdin>")
+    clip = tmp_path / "clip.bvh"
+    clip.write_bytes(b"y" * 5000)
+    opened = []
+    monkeypatch.setattr(files, "open", lambda path, mode: opened.append(Pipe(clip.read_bytes())) or opened[-1],
+                        raising=False)
+    assert files.read_limited(clip, limit=1 << 30, what="clip") == b"y" * 5000
+    assert opened[0].asked[0] == 5001 and max(opened[0].asked) <= 5001
+
+
 def test_the_command_keeps_freed_memory_for_long_clips():
     """The command's process takes large blocks from the heap and keeps what is freed (`keep_freed_memory`):
     set once, in the process; left alone where the user set glibc's variables themselves."""

@@ -49,17 +49,35 @@ def read_limited(path: str | os.PathLike, *, limit: int, what: str, label: str |
     if info.st_size > limit:
         raise InputError(f"is {_size(info.st_size)}; a {what} is read up to {_size(limit)}", source=label)
     with open(path, "rb") as stream:
-        return read_stream(stream, limit=limit, what=what, label=label)
+        return read_stream(stream, limit=limit, what=what, label=label, expected=info.st_size)
 
 
-def read_stream(stream, *, limit: int, what: str, label: str) -> bytes:
-    """At most ``limit`` bytes of a binary stream (standard input); InputError when there are more."""
-    data = stream.read(limit + 1)
-    if isinstance(data, str):
-        data = data.encode("utf-8")
-    if len(data) > limit:
-        raise InputError(f"is over {_size(limit)}; a {what} is read up to {_size(limit)}", source=label)
-    return data
+#: What `read_stream` asks a stream for at a time when it does not know the size.
+READ_PIECE = 16 << 20
+
+
+def read_stream(stream, *, limit: int, what: str, label: str, expected: int | None = None) -> bytes:
+    """At most ``limit`` bytes of a binary stream (standard input); InputError when there are more.
+
+    Read a piece at a time (first ``expected`` bytes and one more, for a file whose size is known): a
+    stream asked for ``limit`` bytes at once is given a buffer that size before anything is read, 1 GiB
+    for every clip, which a machine that does not overcommit memory refuses (MemoryError).
+    """
+    pieces: list[bytes] = []
+    total = 0
+    want = min(limit, expected if expected is not None else READ_PIECE) + 1
+    while True:
+        piece = stream.read(want)
+        if isinstance(piece, str):
+            piece = piece.encode("utf-8")
+        if not piece:
+            break
+        pieces.append(piece)
+        total += len(piece)
+        if total > limit:
+            raise InputError(f"is over {_size(limit)}; a {what} is read up to {_size(limit)}", source=label)
+        want = min(limit + 1 - total, READ_PIECE)
+    return b"".join(pieces)
 
 
 def digest_of(data: bytes | list[bytes]) -> str:
