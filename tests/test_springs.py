@@ -103,6 +103,16 @@ def test_the_compiled_time_loop_is_the_numpy_loop_on_every_clip(path):
         assert np.array_equal(fast[0], positions[0]) and not np.allclose(fast, positions)
 
 
+def test_no_particle_suspended_leaves_the_motion_as_it_was():
+    """No joint active (every link rigid): nothing to simulate, the positions come back (the compiled loop
+    was handed no particles and refused them, a ValueError out of the pipeline)."""
+    positions = np.random.default_rng(4).normal(size=(10, 3, 3))
+    for compiled in (True, False):
+        out = simulate_springs(positions, np.array([-1, 0, 1]), 1 / 30, blend=0.5, active=np.zeros(3, bool),
+                               compiled=compiled, **SETTINGS)
+        assert np.array_equal(out, positions)
+
+
 def test_the_compiled_time_loop_refuses_what_it_cannot_read():
     """It checks its buffers, counts and indices: a ValueError, never a read outside an array."""
     if springs._kernels is None:

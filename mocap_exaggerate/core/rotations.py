@@ -302,7 +302,8 @@ def quat_from_joint_euler(euler: np.ndarray, orders: list[str], *, compiled: boo
         if len(set(order)) == 3:
             i, k, m = ("XYZ".index(a) for a in order)
             codes[j] = (i, k, m, 1 if (k - i) % 3 == 1 else -1)
-    kernel = compiled and _kernels is not None and euler.ndim == 3 and euler.shape[1:] == (len(orders), 3)
+    kernel = (compiled and _kernels is not None and euler.ndim == 3 and euler.shape[1:] == (len(orders), 3)
+              and len(orders) > 0)
     if kernel:
         _kernels.quat_from_euler(np.ascontiguousarray(euler), out, codes, euler.shape[0], len(orders))
     by_order: dict[str, list[int]] = {}
@@ -458,7 +459,7 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
     last_chosen = None  # the previous frame's pick before whole turns, (M, 3)
     last_third = np.full(width, np.nan)  # the third angle of the last frame not at gimbal lock
     ahead = _LookAhead(flat, order, source_columns, block)
-    kernel = compiled and _kernels is not None and reference is None
+    kernel = compiled and _kernels is not None and reference is None and width > 0
     if kernel:  # what the blocks carry, as the kernel keeps it (previous, parity, turns_so_far, last_chosen)
         carried = (np.zeros((width, 3)), parity, turns_so_far, np.zeros((width, 3)))
     for start in range(0, frames, block):

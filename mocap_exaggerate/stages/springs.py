@@ -235,8 +235,10 @@ def _integrate_compiled(follow, link_a, link_b, frame_time, substeps, stiffness,
     same numbers to about 1e-14 of the clip's size, the link forces being summed in another order than
     by the NumPy loop's BLAS products)."""
     follow = np.ascontiguousarray(follow, dtype=np.float64)
-    out = np.empty_like(follow)
     frames, count, _ = follow.shape
+    if not count:  # no particle suspended
+        return follow.copy()
+    out = np.empty_like(follow)
     _kernels.springs(follow, out, np.ascontiguousarray(link_a, dtype=np.int64),
                      np.ascontiguousarray(link_b, dtype=np.int64), frames, count, len(link_a), frame_time, substeps,
                      stiffness, link_stiffness, damping)
