@@ -1,9 +1,11 @@
-"""The compiled pieces: BVH number formatting (``mocap_exaggerate/io/_formatting.c``) and three
-quaternion loops (``mocap_exaggerate/core/_kernels.c``: forward kinematics, world to local,
-frames along rubber links).
+"""The compiled pieces: the BVH motion lines read and written (``mocap_exaggerate/io/_formatting.c``)
+and the quaternion, Euler and spring loops (``mocap_exaggerate/core/_kernels.c``: forward kinematics,
+world to local, frames and twists along rubber links, Euler angles to quaternions and their
+continuity back, the springs' time loop).
 
 Optional: where no C compiler is found the install goes on, and the library uses its NumPy
-code, which gives the same bytes (tests/test_bvh.py and tests/test_rubber_frames.py check both).
+code, which gives the same bytes but for a rare last digit the springs' sums may move
+(tests/test_bvh.py, test_rotations.py, test_rubber_frames.py and test_springs.py check both).
 Everything else is declared in pyproject.toml.
 """
 

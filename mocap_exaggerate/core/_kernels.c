@@ -1,12 +1,15 @@
-/* Quaternion loops NumPy runs as many small passes: forward kinematics (joint by joint, as NumPy's),
- * world-to-local and the rotation-minimising frames carried along each cut link (stages/orient.py),
- * frame by frame, in one pass over memory.
+/* Loops NumPy runs as many small passes, each here one pass over memory: forward kinematics (joint by
+ * joint, as NumPy's), world-to-local, the rotation-minimising frames carried along each cut link and the
+ * twist spread along it (stages/orient.py), the read's Euler angles to quaternions, the BVH writer's
+ * choice of Euler solution and whole turns (core/rotations.py), and the springs' time loop.
  *
  * Every number is computed with the operations NumPy's code uses, in the same order (core/rotations.py:
- * quat_mul, quat_rotate, quat_between, quat_normalize, _norm): +, -, *, / and sqrt only, each rounded
+ * quat_mul, quat_rotate, quat_between, quat_normalize, _norm): +, -, *, /, sqrt and rint, each rounded
  * once (built without fused multiply-add or vectorising: setup.py), so the results are NumPy's bit for
  * bit (a NaN's sign bit aside, which no output carries: the BVH writer refuses NaN) and an install
  * without a C compiler, which runs the NumPy code, writes the same bytes. The tests compare both.
+ * Two exceptions, said where they are: sine and cosine are the C library's (NumPy's where it has no
+ * vector loop of its own), and the springs' link forces are summed in another order than BLAS's.
  *
  * local_from_world(parents, world_rot, world_pos, local_rot, local_pos)
  *     parents (J,) int64 with parents[0] = -1 and parents[j] < j; world_rot (F, J, 4), world_pos (F, J, 3);
