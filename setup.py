@@ -4,8 +4,8 @@ world to local, frames and twists along rubber links, Euler angles to quaternion
 continuity back, the springs' time loop).
 
 Optional: where no C compiler is found the install goes on, and the library uses its NumPy
-code, which gives the same bytes but for a rare last digit the springs' sums may move
-(tests/test_bvh.py, test_rotations.py, test_rubber_frames.py and test_springs.py check both).
+code, which gives the same bytes (tests/test_bvh.py, test_rotations.py, test_rubber_frames.py and
+test_springs.py check both; `python bench/golden.py` with the built modules moved away, all 720 files).
 Everything else is declared in pyproject.toml.
 """
 

@@ -99,14 +99,19 @@ def compare(old: Path, new: Path) -> int:
 
     worst = {".bvh": 0.0, ".glb": 0.0}
     counts = {".bvh": [0, 0, 0], ".glb": [0, 0, 0]}  # files that differ, values that differ, values
-    for a in sorted(old.rglob("*")):
-        b = new / a.relative_to(old)
-        if a.suffix not in worst or not b.exists() or a.read_bytes() == b.read_bytes():
+    kept = {path.relative_to(old) for path in old.rglob("*") if path.suffix in worst}
+    made = {path.relative_to(new) for path in new.rglob("*") if path.suffix in worst}
+    unlike = sorted(kept ^ made)
+    for name in unlike:
+        print(f"{name}: only in {old if name in kept else new}")
+    for name in sorted(kept & made):
+        a, b = old / name, new / name
+        if a.read_bytes() == b.read_bytes():
             continue
         x, y = (_motion_values(a), _motion_values(b)) if a.suffix == ".bvh" else (_glb_floats(a), _glb_floats(b))
         if x.shape != y.shape:
-            print(f"{a.relative_to(old)}: a different number of values ({len(x)} -> {len(y)})")
-            worst[a.suffix] = float("inf")
+            print(f"{name}: a different number of values ({len(x)} -> {len(y)})")
+            unlike.append(name)
             continue
         moved = np.abs(x - y)
         counts[a.suffix][0] += 1
@@ -116,7 +121,7 @@ def compare(old: Path, new: Path) -> int:
     for suffix, (files, values, total) in counts.items():
         print(f"{suffix}: {files} files differ; in them {values:,} of {total:,} values, the largest move "
               f"{worst[suffix]:.3g}")
-    return 0
+    return 1 if unlike else 0
 
 
 def main() -> int:

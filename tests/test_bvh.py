@@ -293,6 +293,13 @@ def test_the_compiled_reader_gives_numpys_values_for_every_way_of_writing_a_numb
         bvh._compiled.parse_motion(b"1 2 3\n", np.empty(2), 3, 1, 1e9)
     with pytest.raises(TypeError):  # only bytes: its closing NUL ends the last number
         bvh._compiled.parse_motion(bytearray(b"1 2 3\n"), np.empty(3), 3, 1, 1e9)
+    for wrong in (np.zeros(6, np.float32), np.zeros(3, np.int64), np.zeros(6)[::2]):  # (a review wrote doubles in floats)
+        with pytest.raises((ValueError, BufferError), match="float64|contiguous"):
+            bvh._compiled.parse_motion(b"1 2 3\n", wrong, 3, 1, 1e9)
+    # A number of thousands of digits (no exporter writes one) is left to the NumPy reader, with the same value:
+    huge = b"1" + b"0" * 5000 + b"e-5000 2 3\n4 5 6\n"
+    ours, theirs = _both_readers(huge, 3, 2)
+    assert ours == theirs and isinstance(ours[0], bytes)
 
 
 @pytest.mark.parametrize("path", all_clip_params())

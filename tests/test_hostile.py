@@ -870,6 +870,13 @@ def test_a_stream_is_read_a_piece_at_a_time_never_asked_for_the_whole_limit(monk
     assert max(pipe.asked) <= 11
     with pytest.raises(InputError, match="is over"):
         files.read_stream(Pipe(b"x" * 101), limit=100, what="clip", label="<stdin>")
+
+    class NonBlocking(Pipe):  # has nothing for a moment: None, as a non-blocking pipe says it
+        def read(self, size: int = -1):
+            return None if len(self.asked) == 1 and self.asked.append(size) is None else super().read(size)
+
+    with pytest.raises(InputError, match="non-blocking"):  # (its first 7 bytes are not the clip: refused, not cut)
+        files.read_stream(NonBlocking(b"HIERARCHY" * 3), limit=100, what="clip", label="<stdin>")
     clip = tmp_path / "clip.bvh"
     clip.write_bytes(b"y" * 5000)
     opened = []

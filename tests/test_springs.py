@@ -84,22 +84,20 @@ def test_compiled_kernel_equals_the_python_loop(sample_clip):
 @pytest.mark.parametrize("path", all_clip_params())
 def test_the_compiled_time_loop_is_the_numpy_loop_on_every_clip(path):
     """core/_kernels.c's time loop against the NumPy one it stands in for, every particle of every clip
-    (the whole skeleton suspended): the link forces are summed in another order than BLAS sums them, so
-    to about 1e-14 of the clip's size at the defaults, not bit for bit."""
+    (the whole skeleton suspended): the same bits, so an install without a C compiler writes the same
+    bytes. Also where the follow-through is chaotic (the stiffest links the step can carry, no drag),
+    where sums in any other order part from these by centimetres within seconds."""
     if springs._kernels is None:
         pytest.skip("core/_kernels.c was not built (no C compiler at install); the NumPy loop is what runs")
     motion, _ = read_bvh(path)
     positions = np.ascontiguousarray(motion.world_positions()[:400])
-    size = np.ptp(positions.reshape(-1, 3), axis=0).max()
     links = spring_links(motion.skeleton.parents)
-    # The defaults, and stiff springs with little drag. (Not links at the stiffness the step can only just
-    # carry: there any two orders of sums part as the motion goes on, by 3 % of the clip's size at 5,000.)
-    for stiffness, link_stiffness, damping in ((150.0, 150.0, 8.0), (600.0, 1000.0, 1.0)):
+    for stiffness, link_stiffness, damping in ((150.0, 150.0, 8.0), (100.0, 1e5, 0.0)):
         substeps = substeps_for(motion.frame_time, stiffness, link_stiffness, links.degree)
         link_stiffness = stable_link_stiffness(motion.frame_time, link_stiffness, links.degree, substeps)
         args = (positions, links.link_a, links.link_b, motion.frame_time, substeps, stiffness, link_stiffness, damping)
         fast, numpy_loop = springs._integrate_compiled(*args), springs._integrate_vectorised(*args)
-        assert np.max(np.abs(fast - numpy_loop)) <= 1e-12 * size
+        assert fast.view(np.int64).tolist() == numpy_loop.view(np.int64).tolist()
         assert np.array_equal(fast[0], positions[0]) and not np.allclose(fast, positions)
 
 

@@ -8,8 +8,7 @@
  * once (built without fused multiply-add or vectorising: setup.py), so the results are NumPy's bit for
  * bit (a NaN's sign bit aside, which no output carries: the BVH writer refuses NaN) and an install
  * without a C compiler, which runs the NumPy code, writes the same bytes. The tests compare both.
- * Two exceptions, said where they are: sine and cosine are the C library's (NumPy's where it has no
- * vector loop of its own), and the springs' link forces are summed in another order than BLAS's.
+ * Sine and cosine are the C library's (NumPy's where it has no vector loop of its own, as here).
  *
  * local_from_world(parents, world_rot, world_pos, local_rot, local_pos)
  *     parents (J,) int64 with parents[0] = -1 and parents[j] < j; world_rot (F, J, 4), world_pos (F, J, 3);
@@ -27,17 +26,18 @@
  * quat_from_euler(euler, out, codes)
  *     euler (F, J, 3) degrees, out (F, J, 4); codes (J, 4) int64: the axes i, j, k of the joint's
  *     intrinsic order and its parity (+1 or -1), or i = -1 for a joint left as it is.
- * euler_continuity(first, previous, parity, turns, last, started)
+ * euler_continuity(first, previous, parity, turns, last, frames, width, started)
  *     euler_blocks' choice between each frame's two Euler solutions and its whole turns, for a block of
  *     frames: first (n, M, 3) float64 the first solutions, overwritten by the angles chosen; previous,
  *     turns and last (M, 3) float64 and parity (M,) int64 what the blocks before carried (read when
  *     started is 1), updated for the next. Only +, -, *, / and rint (NumPy's round), so NumPy's bits.
- * springs(follow, out, link_a, link_b, frame_time, substeps, stiffness, link_stiffness, damping)
+ * springs(follow, out, link_a, link_b, frames, particles, links, frame_time, substeps, stiffness, link_stiffness,
+ *         damping)
  *     the suspended particles' time loop (stages/springs.py, `_integrate_vectorised`): follow and out
- *     (F, P, 3) float64, link_a and link_b (L,) int64 particle indices. The same operations as the NumPy
- *     loop's, but its link forces are gathered and scattered by BLAS products, whose order of sums a C
- *     loop cannot know: the two agree to about 1e-14 of a clip's size (tests/test_springs.py), not bit
- *     for bit, and a BVH written either way has the same digits but for a rare last one.
+ *     (F, P, 3) float64, link_a and link_b (L,) int64 particle indices. The NumPy loop's operations in its
+ *     order (each end's link pulls summed as np.bincount sums them), so its bits: near the stiffness the
+ *     step can only just carry and with no drag the follow-through is chaotic, and any other order of
+ *     sums would part from it by centimetres within a few seconds.
  *
  * twist_frames and quat_from_euler call the C library's sin and cos, as NumPy does for float64 where it has no vector loop
  * of its own (on this machine: tests/test_rubber_frames.py and tests/test_bvh.py compare the two, bit
@@ -495,7 +495,7 @@ static PyObject *springs(PyObject *self, PyObject *args) {
     }
     double *work = NULL;
     if (!bad && frames >= 2) {
-        work = (double *)PyMem_RawMalloc(sizeof(double) * (size_t)(count * 9 + links));
+        work = (double *)PyMem_RawMalloc(sizeof(double) * (size_t)(count * 15 + links));
         if (work == NULL) {
             PyErr_NoMemory();
             bad = 1;
@@ -505,7 +505,8 @@ static PyObject *springs(PyObject *self, PyObject *args) {
         const double *follow = (const double *)views[0].buf;
         double *out = (double *)views[1].buf;
         const int64_t *link_a = (const int64_t *)views[2].buf, *link_b = (const int64_t *)views[3].buf;
-        double *x = work, *v = work + count * 3, *anchor = work + count * 6, *rest = work + count * 9;
+        double *x = work, *v = work + count * 3, *anchor = work + count * 6, *rest = work + count * 15;
+        double *pulled_a = work + count * 9, *pulled_b = work + count * 12; /* the link forces on each end */
         const Py_ssize_t n = count * 3;
         Py_BEGIN_ALLOW_THREADS
         const double h = frame_time / (double)substeps;
@@ -532,19 +533,23 @@ static PyObject *springs(PyObject *self, PyObject *args) {
                     const double r[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
                     rest[l] = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
                 }
+                /* Each end's pulls summed from zero in the links' order, then added to v, as np.bincount sums
+                 * them for the NumPy loop: the same bits. */
+                memset(pulled_a, 0, sizeof(double) * (size_t)n);
+                memset(pulled_b, 0, sizeof(double) * (size_t)n);
                 for (Py_ssize_t l = 0; l < links; l++) {
-                    double *va = v + link_a[l] * 3, *vb = v + link_b[l] * 3;
                     const double *xa = x + link_a[l] * 3, *xb = x + link_b[l] * 3;
                     const double e[3] = {xb[0] - xa[0], xb[1] - xa[1], xb[2] - xa[2]};
                     const double length = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
                     /* 1 - rest / length; a collapsed link (length 0) has e = 0 and pulls with nothing */
-                    const double scale = 1.0 - rest[l] / (length > 1e-300 ? length : 1e-300);
+                    const double scale = 1.0 - rest[l] / (!(length < 1e-300) ? length : 1e-300); /* np.maximum */
                     for (int c = 0; c < 3; c++) {
                         const double pulled = strength * (scale * e[c]);
-                        va[c] += pulled;
-                        vb[c] -= pulled;
+                        pulled_a[link_a[l] * 3 + c] += pulled;
+                        pulled_b[link_b[l] * 3 + c] += pulled;
                     }
                 }
+                for (Py_ssize_t i = 0; i < n; i++) v[i] = v[i] + pulled_a[i] - pulled_b[i];
                 for (Py_ssize_t i = 0; i < n; i++) x[i] = x[i] + h * v[i];
             }
             memcpy(out + (f + 1) * n, x, sizeof(double) * (size_t)n);

@@ -143,6 +143,7 @@ static inline int is_space(unsigned char c) { return c == ' ' || (c >= 9 && c <=
 static int parse_number(const char *at, const char *end, double *value) {
     const char *p = at;
     int negative = 0;
+    if (end - at > 4096) return 0; /* (no number is written so; its digit counts stay far from overflow) */
     if (p < end && (*p == '+' || *p == '-')) negative = *p++ == '-';
     uint64_t mantissa = 0;
     int significant = 0, dropped = 0, scale = 0, any = 0;
@@ -216,14 +217,16 @@ static int parse_number(const char *at, const char *end, double *value) {
 
 static PyObject *parse_motion(PyObject *self, PyObject *args) {
     Py_buffer out;
-    PyObject *block;
+    PyObject *block, *target;
     Py_ssize_t channels, declared;
     double largest;
-    if (!PyArg_ParseTuple(args, "Sw*nnd", &block, &out, &channels, &declared, &largest)) return NULL;
-    if (channels < 1 || declared < 1 || declared > PY_SSIZE_T_MAX / 8 / channels ||
+    if (!PyArg_ParseTuple(args, "SOnnd", &block, &target, &channels, &declared, &largest)) return NULL;
+    if (PyObject_GetBuffer(target, &out, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) return NULL;
+    if (channels < 1 || declared < 1 || declared > PY_SSIZE_T_MAX / 8 / channels || out.format == NULL ||
+        strcmp(out.format, "d") != 0 || out.itemsize != (Py_ssize_t)sizeof(double) || !PyBuffer_IsContiguous(&out, 'C') ||
         out.len != declared * channels * (Py_ssize_t)sizeof(double)) {
         PyBuffer_Release(&out);
-        PyErr_SetString(PyExc_ValueError, "parse_motion: out must hold declared * channels float64");
+        PyErr_SetString(PyExc_ValueError, "parse_motion: out must be a C-contiguous float64 buffer of declared * channels");
         return NULL;
     }
     const char *at = PyBytes_AS_STRING(block), *end = at + PyBytes_GET_SIZE(block);

@@ -500,7 +500,7 @@ def _parse_motion(
     """Frame values ``(F, C)`` from the bytes after ``Frame Time:``.
 
     ``compiled``: a well-formed block is read in one pass by ``io/_formatting.c`` where it was built (the
-    same values; a third of the time); a block it does not take as it is, and every fault, the NumPy code
+    same values; a sixth of the time); a block it does not take as it is, and every fault, the NumPy code
     below reads and names.
     """
     # (Each value takes two bytes at least, a digit and a space or LF: a header that declares more than

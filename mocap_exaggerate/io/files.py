@@ -68,6 +68,9 @@ def read_stream(stream, *, limit: int, what: str, label: str, expected: int | No
     want = min(limit, expected if expected is not None else READ_PIECE) + 1
     while True:
         piece = stream.read(want)
+        if piece is None:  # a non-blocking stream with nothing yet: what was read is not the whole
+            raise InputError(f"could not be read whole (a non-blocking stream gave nothing after {total} bytes)",
+                             source=label)
         if isinstance(piece, str):
             piece = piece.encode("utf-8")
         if not piece:
