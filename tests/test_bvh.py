@@ -217,6 +217,10 @@ def test_compiled_formatter_is_built_where_ci_runs():
 
     if shutil.which("cc") is None and shutil.which("gcc") is None:
         pytest.skip("no C compiler here: the install uses the NumPy formatter")
+    from mocap_exaggerate.core import native
+
+    if not native.ENABLED:
+        pytest.skip(f"{native.NUMPY_ONLY} is set: the NumPy code runs")
     assert bvh._compiled is not None, "io/_formatting.c was not built: pip install -e . (setup.py builds it)"
 
 

@@ -103,7 +103,8 @@ def test_the_compiled_time_loop_is_the_numpy_loop_on_every_clip(path):
 
 def test_no_particle_suspended_leaves_the_motion_as_it_was():
     """No joint active (every link rigid): nothing to simulate, the positions come back (the compiled loop
-    was handed no particles and refused them, a ValueError out of the pipeline)."""
+    was handed no particles and refused them, and the NumPy loop could not shape them: a ValueError out of
+    the pipeline either way)."""
     positions = np.random.default_rng(4).normal(size=(10, 3, 3))
     for compiled in (True, False):
         out = simulate_springs(positions, np.array([-1, 0, 1]), 1 / 30, blend=0.5, active=np.zeros(3, bool),

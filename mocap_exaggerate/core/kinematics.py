@@ -11,12 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .native import kernels as _kernels  # the compiled loops, where built (core/native.py)
 from .rotations import CACHE_ELEMENTS, quat_inv, quat_mul, quat_rotate
-
-try:  # optional: setup.py builds it where there is a C compiler
-    from . import _kernels
-except ImportError:  # pragma: no cover - the NumPy code gives the same bits
-    _kernels = None
 
 __all__ = ["forward_kinematics", "local_from_world", "parent_rotations", "rest_positions", "frame_blocks", "cache_blocks",
            "CACHE_ELEMENTS"]

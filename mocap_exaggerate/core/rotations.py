@@ -19,10 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-try:  # the compiled loops (setup.py builds them where a C compiler is found)
-    from . import _kernels
-except ImportError:  # pragma: no cover - an install without a compiler runs the NumPy code
-    _kernels = None
+from .native import kernels as _kernels  # the compiled loops, where built (core/native.py)
 
 __all__ = [
     "quat_mul",

@@ -31,6 +31,7 @@ import numpy as np
 
 from ..core.errors import InputError, check_choice
 from ..core.motion import Motion
+from ..core.native import ENABLED as _NATIVE
 from ..core.rotations import euler_blocks, quat_from_joint_euler
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .files import atomic_write, write_all
@@ -45,6 +46,8 @@ _CHANNEL_NAMES = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
 try:  # optional: setup.py builds it where there is a C compiler (the motion lines read and written)
     from . import _formatting as _compiled
 except ImportError:  # pragma: no cover - the NumPy code reads the same values and writes the same bytes
+    _compiled = None
+if not _NATIVE:  # MOCAP_EXAGGERATE_NUMPY_ONLY (core/native.py)
     _compiled = None
 
 _WHITESPACE = np.zeros(256, dtype=bool)

@@ -31,6 +31,7 @@ import numpy as np
 from ..analysis.branches import effective_lengths, first_above_at_distance, first_below_at_distance, riders
 from ..core.kinematics import cache_blocks, local_from_world
 from ..core.motion import Motion
+from ..core.native import kernels as _kernels  # the compiled loops, where built (core/native.py)
 from ..core.rotations import (
     quat_between,
     quat_from_matrix,
@@ -44,11 +45,6 @@ from ..core.rotations import (
 )
 from ..core.timing import gaussian_average, smootherstep, step_gain
 from .state import Output
-
-try:  # optional: setup.py builds it where there is a C compiler
-    from ..core import _kernels
-except ImportError:  # pragma: no cover - the NumPy code gives the same bits
-    _kernels = None
 from .subjoints import SubjointHierarchy, link_starts
 
 if TYPE_CHECKING:

@@ -27,16 +27,12 @@ import numpy as np
 from ..analysis.limbs import limb_hinges, limb_joints
 from ..core.errors import ConfigError, check_flag, check_number
 from ..core.kinematics import frame_blocks
+from ..core.native import kernels as _kernels  # the compiled loops, where built (core/native.py)
 from ..core.rotations import vector_norm
 from ..core.settings import Flag, setting
 from ..core.timing import smootherstep, soft_limit
 from .bends import keep_bends_on_rubber
 from .subjoints import even_out
-
-try:  # the time loop compiled (setup.py builds it where there is a C compiler)
-    from ..core import _kernels
-except ImportError:  # pragma: no cover - the NumPy loop gives the same bits
-    _kernels = None
 
 if TYPE_CHECKING:
     from .state import State
@@ -231,8 +227,6 @@ def _integrate_compiled(follow, link_a, link_b, frame_time, substeps, stiffness,
     10,000 frames)."""
     follow = np.ascontiguousarray(follow, dtype=np.float64)
     frames, count, _ = follow.shape
-    if not count:  # no particle suspended
-        return follow.copy()
     out = np.empty_like(follow)
     _kernels.springs(follow, out, np.ascontiguousarray(link_a, dtype=np.int64),
                      np.ascontiguousarray(link_b, dtype=np.int64), frames, count, len(link_a), frame_time, substeps,
@@ -316,6 +310,8 @@ def simulate_springs(
     if not np.any(blend) or positions.shape[0] < 2:
         return out
     members, link_a, link_b, degree = links or spring_links(parents, active)
+    if not len(members):  # no particle suspended: nothing swings
+        return out
     substeps = substeps_for(frame_time, stiffness, link_stiffness, degree)
     link_stiffness = stable_link_stiffness(frame_time, link_stiffness, degree, substeps)
     follow = np.ascontiguousarray(positions[:, members])
