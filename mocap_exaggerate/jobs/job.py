@@ -347,7 +347,7 @@ def convert(
     timings["read"] = time.perf_counter() - started
     warnings = list(report.warnings) + changed
     if glb:
-        from ..io.gltf import guessed_units_warning
+        from ..io.units import guessed_units_warning
 
         unlikely = guessed_units_warning(glb_units, motion.skeleton.height())
         warnings += [unlikely] if unlikely else []
@@ -467,7 +467,7 @@ class Character:
         joint_map = settings.joint_map or None if joint_map is None else joint_map
         skin_file, map_file = (Path(p) if isinstance(p, (str, os.PathLike)) else None for p in (skin, joint_map))
         if glb:
-            from ..io.gltf import unit_scale
+            from ..io.units import unit_scale
 
             unit_scale(units, 1.0)  # a bad unit is refused before anything runs
             if influences not in (4, 8):
