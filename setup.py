@@ -9,6 +9,8 @@ test_springs.py check both; `python bench/golden.py` with the built modules move
 Everything else is declared in pyproject.toml.
 """
 
+import sys
+
 from setuptools import Extension, setup
 
 #: No fused multiply-add: ``-ffp-contract=off`` alone is not enough where CFLAGS carry ``-march=native``
@@ -30,7 +32,7 @@ setup(
             "mocap_exaggerate.core._kernels",
             ["mocap_exaggerate/core/_kernels.c"],
             extra_compile_args=NO_FUSING,  # NumPy's rounding, bit for bit
-            libraries=["m"],  # sin and cos: the C library's, as NumPy's float64 loops call them
+            libraries=[] if sys.platform == "win32" else ["m"],  # sin, cos: the C library's, as NumPy's
             optional=True,
         ),
     ]

@@ -49,6 +49,10 @@
 #include <stdint.h>
 #include <string.h>
 
+#ifndef M_PI /* (MSVC defines it only when asked) */
+#define M_PI 3.14159265358979323846
+#endif
+
 /* ------------------------------------------------------------------ NumPy's arithmetic, one at a time */
 
 static inline void quat_mul(const double *a, const double *b, double *out) {
