@@ -86,10 +86,11 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
         if "usd" in written:
             suffixes["usd"] = Path(written["usd"]).suffix
         extras = ", ".join(suffixes[k] for k in written if k in suffixes)
+        frames = f"{record.frames} frame{'s' * (record.frames != 1)}"
+        joints = f"{record.joints} joint{'s' * (record.joints != 1)}"
         click.echo(
             f"wrote {written['bvh']}{', ' + extras if extras else ''} and {written['manifest'].name}: "
-            f"{record.frames} frames, {record.joints} joints, max link stretch {record.max_link_stretch:.2f}x, "
-            f"{record.seconds:.2f} s",
+            f"{frames}, {joints}, max link stretch {record.max_link_stretch:.2f}x, {record.seconds:.2f} s",
             err=True,
         )
 

@@ -10,7 +10,7 @@ from mocap_exaggerate.core.errors import InputError
 from mocap_exaggerate.io.bvh import format_bvh, read_bvh, save_bvh
 from mocap_exaggerate.io.files import OutputExistsError
 
-from .helpers import MALFORMED, SIMPLE, all_clip_params, make_bvh, shared, shared_clip_params
+from .helpers import MALFORMED, SAMPLE_DIR, SIMPLE, all_clip_params, make_bvh, shared, shared_clip_params
 
 # frames, joints, End Sites, channels: from ../shared/data/bvh/SOURCES.md
 EXPECTED = {
@@ -329,3 +329,20 @@ def test_both_formatters_write_a_whole_clip_alike(sample_clip):
     motion, _ = read_bvh(sample_clip)
     values = bvh.motion_channels(motion)
     assert bvh.format_fixed(values) == bvh.format_fixed(values, compiled=False)
+
+
+def test_a_file_cut_inside_the_hierarchy_says_so(tmp_path):
+    """A clip cut in the middle of a word of its hierarchy named the word and no more (a new user's trial:
+    `unexpected 'CHA' in joint 'LThumb'`): it says the file ends there. A fault elsewhere is named as it was."""
+    data = (SAMPLE_DIR / "cmu_09_01_run_daz.bvh").read_bytes()
+    cut = data[: data.index(b"CHANNELS", 5000) + 3]
+    with pytest.raises(InputError, match=r"unexpected 'CHA' in joint .*; the file ends on this line, inside the "
+                                         r"hierarchy \(truncated\?\)") as caught:
+        read_bvh(cut)
+    assert caught.value.line == cut.count(b"\n") + 1
+    with pytest.raises(InputError, match=r"file ends where '}'( closing joint .*)? was expected$"):
+        read_bvh(data[: data.index(b"}", 3000) - 2])
+    broken = data.replace(b"CHANNELS", b"CHANELS", 1)
+    with pytest.raises(InputError, match=r"CHANELS") as caught:
+        read_bvh(broken)
+    assert "truncated" not in str(caught.value)

@@ -265,3 +265,16 @@ def test_omega_that_saturates_says_so_and_the_manifest_records_it(sample_clip):
                     timings={})
     assert info["result"]["speed_limit"]["taken"] == round(report.taken, 4)
     assert said[0] in info["warnings"]
+
+
+def test_a_sigma_under_a_frame_is_said(sample_clip):
+    """``--sigma 0`` ran, said "max link stretch 1.00x" and nothing else (a new user's trial): an average
+    over less than a frame is the motion itself. It is a warning now, and only where omega would do something."""
+    from mocap_exaggerate.config import PipelineConfig
+    from mocap_exaggerate.pipeline import run
+
+    motion, _ = read_bvh(sample_clip)
+    for sigma, omega, said in (("0", 3.0, True), ("0.5f", 3.0, True), ("0", 1.0, False), ("0.2s", 3.0, False)):
+        config = PipelineConfig.from_dict({"extrapolate": {"sigma": sigma, "omega": omega}})
+        warned = [w for w in run(motion, config).warnings if "extrapolate.sigma" in w]
+        assert bool(warned) == said, (sigma, omega, warned)

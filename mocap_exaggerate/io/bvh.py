@@ -147,7 +147,14 @@ def read_bvh(
         last_line = data.rstrip().count(b"\n") + 1
         if not data.strip():
             raise InputError("file is empty", source=label, line=1)
-        _parse_header(_decode(data, label), label)  # reports the first header fault, if any
+        try:
+            _parse_header(_decode(data, label), label)  # reports the first header fault, if any
+        except InputError as error:
+            if error.line != last_line or "file ends" in error.message:
+                raise
+            # A fault on the last line of a file with no MOTION: the file stops inside the hierarchy.
+            raise InputError(f"{error.message}; the file ends on this line, inside the hierarchy (truncated?)",
+                             source=label, line=last_line) from None
         raise InputError("no MOTION section after the hierarchy", source=label, line=last_line)
     header_text = _decode(data[: motion_match.start()], label)
     skeleton = _parse_header(header_text, label)

@@ -322,7 +322,12 @@ def extrapolate_stage(state: State, config: ExtrapolateConfig) -> State:
     report = speed_limit_report(limited, skeleton, config.max_speed, frame_time, first, sigma)
     if report is not None and report.joints:
         notes += (report.note(),)
-    return replace(state, positions=positions, notes=notes, speed_limit=config.max_speed, speed_report=report)
+    warnings = state.warnings
+    if sigma < 1.0 and config.omega != 1.0:  # (a new user's --sigma 0 ran, said 1.00x and nothing else)
+        warnings += (f"extrapolate.sigma {config.sigma!r} is {sigma:.3g} frames: an average over less than a frame "
+                     "is the motion itself, so next to nothing is exaggerated (the presets take 0.15-0.3s)",)
+    return replace(state, positions=positions, notes=notes, warnings=warnings, speed_limit=config.max_speed,
+                   speed_report=report)
 
 
 #: The speed limit is said (with -v, and in the manifest's warnings) when it takes more than this
