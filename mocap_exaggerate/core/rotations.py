@@ -289,7 +289,7 @@ def quat_from_joint_euler(euler: np.ndarray, orders: list[str], *, compiled: boo
 
     ``compiled``: the Tait-Bryan joints in one pass by ``core/_kernels.c`` where it was built (NumPy's
     arithmetic in its order, with the C library's sine and cosine: the same bits where NumPy's are the
-    C library's, as on the machines we test; a fifth of the time).
+    C library's, as on the machines we test; half the time).
     """
     euler = np.asarray(euler, dtype=np.float64)
     out = np.empty(euler.shape[:-1] + (4,))
