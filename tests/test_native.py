@@ -57,3 +57,45 @@ def test_the_variable_turns_every_compiled_loop_off():
         done = subprocess.run([sys.executable, "-c", code], env={**os.environ, native.NUMPY_ONLY: value},
                               capture_output=True, text=True, timeout=120)
         assert done.stdout.strip() == expected, done.stderr
+
+
+def test_a_long_clip_shared_between_two_cores_is_the_same_bits(tmp_path, monkeypatch):
+    """From `native.SHARE_FROM` frames on, the compiled loops and the Gaussian's FFTs run in two halves on
+    two threads: every output byte as in one piece (each frame, each series, is made on its own). The
+    shipped and shared clips are all shorter, so one is tiled to 5,000 frames."""
+    from mocap_exaggerate import convert
+
+    data = (SAMPLE_DIR / "cmu_09_01_run_daz.bvh").read_bytes()
+    head, _, rest = data.partition(b"MOTION")
+    lines = rest.strip().split(b"\n")
+    frame_time, motion = lines[1], lines[2:]
+    tiled = (head + b"MOTION\nFrames: 5000\n" + frame_time + b"\n"
+             + b"\n".join((motion * (5000 // len(motion) + 1))[:5000]) + b"\n")
+    clip = tmp_path / "long.bvh"
+    clip.write_bytes(tiled)
+    made = {}
+    for name, share in (("halves", 4096), ("whole", 10**12)):
+        monkeypatch.setattr(native, "SHARE_FROM", share)
+        assert len(native.frame_halves(5000)) == (2 if share == 4096 else 1) or (os.cpu_count() or 1) < 2
+        convert(clip, tmp_path / name, preset="looney")
+        made[name] = _outputs(tmp_path / name)
+        made[name].pop("long.json")  # (its timings aside, the manifest is the same; the others are compared whole)
+    assert made["halves"] == made["whole"]
+
+
+def test_work_on_both_cores_waits_for_both_and_raises_what_either_raised():
+    import numpy as np
+
+    seen = np.zeros(10, int)
+    native.on_both_cores(lambda part: seen.__setitem__(part, seen[part] + 1), [slice(0, 5), slice(5, 10)])
+    assert seen.tolist() == [1] * 10
+
+    def fail_first(part):
+        if part.start == 0:
+            raise ValueError("the helper's half")
+        seen[part] += 1
+
+    with pytest.raises(ValueError, match="helper's half"):
+        native.on_both_cores(fail_first, [slice(0, 5), slice(5, 10)])
+    assert seen[5:].tolist() == [2] * 5  # the other half was done, and waited for
+    assert native.frame_halves(100) == [slice(0, 100)] and native.frame_halves(1, per_item=10**6) == [slice(0, 1)]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .native import frame_halves, on_both_cores
 from .native import kernels as _kernels  # the compiled loops, where built (core/native.py)
 from .rotations import CACHE_ELEMENTS, quat_inv, quat_mul, quat_rotate
 
@@ -69,8 +70,11 @@ def local_from_world(
     if (compiled and _kernels is not None and world_rot.ndim == 3 and world_rot.shape[2:] == (4,)
             and world_pos.shape == world_rot.shape[:2] + (3,) and len(parents) == world_rot.shape[1]
             and world_rot.flags.c_contiguous and world_pos.flags.c_contiguous):
-        _kernels.local_from_world(np.ascontiguousarray(parents, dtype=np.int64), world_rot, world_pos, local_rot,
-                                  local_pos, world_rot.shape[0], world_rot.shape[1])
+        parents = np.ascontiguousarray(parents, dtype=np.int64)
+        joints = world_rot.shape[1]
+        on_both_cores(lambda part: _kernels.local_from_world(
+            parents, world_rot[part], world_pos[part], local_rot[part], local_pos[part], part.stop - part.start,
+            joints), frame_halves(len(world_rot)))
         return local_rot, local_pos
     local_rot[:, 0] = world_rot[:, 0]
     local_pos[:, 0] = world_pos[:, 0]

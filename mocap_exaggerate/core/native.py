@@ -25,3 +25,40 @@ if ENABLED:
         from . import _kernels as kernels
     except ImportError:  # pragma: no cover - an install without a C compiler
         kernels = None
+
+
+#: Frames below which a compiled loop is not shared between two threads (starting one costs more).
+SHARE_FROM = 4096
+_helper = None
+
+
+def frame_halves(frames: int, *, per_item: int = 1) -> list[slice]:
+    """``range(frames)`` as two halves where a second core can take one (a long clip), else as one slice.
+    ``per_item``: how many frames' work each item is (for items that are not frames)."""
+    if frames < 2 or frames * per_item < SHARE_FROM or (os.cpu_count() or 1) < 2:
+        return [slice(0, frames)]
+    middle = frames // 2
+    return [slice(0, middle), slice(middle, frames)]
+
+
+def on_both_cores(run, parts: list[slice]) -> None:
+    """``run(part)`` for each part, the last on this thread and the others on a helper thread at once.
+
+    For the compiled loops, which let go of the GIL, work frame by frame, and write each frame where
+    only that frame's call writes: the same bits as one call, in about half the time on two cores.
+    """
+    global _helper
+    if len(parts) < 2:
+        for part in parts:
+            run(part)
+        return
+    if _helper is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _helper = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mocap-kernels")
+    pending = [_helper.submit(run, part) for part in parts[:-1]]
+    try:
+        run(parts[-1])
+    finally:
+        for job in pending:
+            job.result()

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .native import frame_halves, on_both_cores
 from .native import kernels as _kernels  # the compiled loops, where built (core/native.py)
 
 __all__ = [
@@ -302,7 +303,9 @@ def quat_from_joint_euler(euler: np.ndarray, orders: list[str], *, compiled: boo
     kernel = (compiled and _kernels is not None and euler.ndim == 3 and euler.shape[1:] == (len(orders), 3)
               and len(orders) > 0)
     if kernel:
-        _kernels.quat_from_euler(np.ascontiguousarray(euler), out, codes, euler.shape[0], len(orders))
+        euler = np.ascontiguousarray(euler)
+        on_both_cores(lambda part: _kernels.quat_from_euler(euler[part], out[part], codes, part.stop - part.start,
+                                                            len(orders)), frame_halves(len(euler)))
     by_order: dict[str, list[int]] = {}
     for j, order in enumerate(orders):
         if not kernel or codes[j, 0] < 0:

@@ -16,6 +16,7 @@ import re
 import numpy as np
 
 from .errors import ConfigError
+from .native import frame_halves, on_both_cores
 
 __all__ = ["parse_duration", "check_duration", "parse_frame", "gaussian_average", "step_gain", "spread_max",
            "smootherstep", "end_ramp", "soft_limit"]
@@ -126,9 +127,15 @@ def _convolve_gaussian(padded: np.ndarray, sigma: float, radius: int) -> np.ndar
     # Each series contiguous (frames last): NumPy's FFT along a strided axis copies every column in and
     # out on its own, twice the time of the transform itself (180 -> 92 ms on 10,000 x 285; the same bits).
     series = np.ascontiguousarray(padded.reshape(length, -1).T)
-    spectrum = np.fft.rfft(series, size, axis=-1)
-    spectrum *= np.fft.rfft(kernel, size)
-    smooth = np.fft.irfft(spectrum, size, axis=-1)[:, 2 * radius : 2 * radius + frames]
+    response = np.fft.rfft(kernel, size)
+    smooth = np.empty((len(series), frames))
+
+    def convolve(part: slice) -> None:  # (each series on its own: the same bits in halves, on two cores)
+        spectrum = np.fft.rfft(series[part], size, axis=-1)
+        spectrum *= response
+        smooth[part] = np.fft.irfft(spectrum, size, axis=-1)[:, 2 * radius : 2 * radius + frames]
+
+    on_both_cores(convolve, frame_halves(len(series), per_item=length // 64))  # (a series: 1/64 of its frames' work)
     return np.ascontiguousarray(smooth.T).reshape((frames,) + padded.shape[1:])
 
 

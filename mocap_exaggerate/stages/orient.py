@@ -31,6 +31,7 @@ import numpy as np
 from ..analysis.branches import effective_lengths, first_above_at_distance, first_below_at_distance, riders
 from ..core.kinematics import cache_blocks, local_from_world
 from ..core.motion import Motion
+from ..core.native import frame_halves, on_both_cores
 from ..core.native import kernels as _kernels  # the compiled loops, where built (core/native.py)
 from ..core.rotations import (
     quat_between,
@@ -268,8 +269,11 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
     angle = np.empty((len(out), len(starts)))
     kernel = compiled and _kernels is not None and positions.dtype == np.float64 and positions.flags.c_contiguous
     if kernel:
-        _kernels.chain_frames(out, positions, head.astype(np.int64), starts.astype(np.int64), cuts.astype(np.int64),
-                              np.ascontiguousarray(direction, dtype=np.float64), *out.shape[:2], len(starts))
+        heads, firsts, counts = head.astype(np.int64), starts.astype(np.int64), cuts.astype(np.int64)
+        direction = np.ascontiguousarray(direction, dtype=np.float64)
+        on_both_cores(lambda part: _kernels.chain_frames(
+            out[part], positions[part], heads, firsts, counts, direction, part.stop - part.start, out.shape[1],
+            len(starts)), frame_halves(len(out)))
     for part in cache_blocks(len(out), len(starts)):
         if kernel:
             frame = out[part, starts + cuts - 1]
@@ -292,8 +296,10 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
                                  * smootherstep((np.pi - np.abs(twisted)) / (np.pi - _TWIST_FADE)))
     angle = gaussian_average(angle, 1.0, ends="nearest")  # where the fades pass quickly, over a few frames
     if kernel:
-        _kernels.twist_frames(out, np.ascontiguousarray(angle), starts.astype(np.int64), cuts.astype(np.int64),
-                              np.ascontiguousarray(direction, dtype=np.float64), *out.shape[:2], len(starts))
+        angle = np.ascontiguousarray(angle)
+        on_both_cores(lambda part: _kernels.twist_frames(
+            out[part], angle[part], firsts, counts, direction, part.stop - part.start, out.shape[1], len(starts)),
+            frame_halves(len(out)))
         return out
     for part in cache_blocks(len(out), len(starts)):
         for k, (on, joint) in enumerate(steps[1:], start=1):
