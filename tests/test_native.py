@@ -18,6 +18,17 @@ from .helpers import SAMPLE_DIR
 CLI = [sys.executable, "-m", "mocap_exaggerate_cli.main"]
 
 
+def _halves_in_a_child() -> list[int]:
+    seen = [0] * 10
+
+    def mark(part: slice) -> None:
+        for k in range(part.start, part.stop):
+            seen[k] += 1
+
+    native.on_both_cores(mark, [slice(0, 5), slice(5, 10)])
+    return seen
+
+
 def _outputs(folder) -> dict[str, bytes]:
     found = {}
     for path in sorted(folder.iterdir()):
@@ -99,3 +110,16 @@ def test_work_on_both_cores_waits_for_both_and_raises_what_either_raised():
         native.on_both_cores(fail_first, [slice(0, 5), slice(5, 10)])
     assert seen[5:].tolist() == [2] * 5  # the other half was done, and waited for
     assert native.frame_halves(100) == [slice(0, 100)] and native.frame_halves(1, per_item=10**6) == [slice(0, 1)]
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork here")
+def test_a_process_forked_after_the_helper_started_makes_its_own():
+    """A child made by fork has no copy of the parent's helper thread: its executor, copied, would queue the
+    work and never run it (a hang). The child starts its own."""
+    import multiprocessing
+
+    native.on_both_cores(lambda part: None, [slice(0, 1), slice(1, 2)])  # the parent's helper is up
+    assert native._helper is not None
+    context = multiprocessing.get_context("fork")
+    with context.Pool(1) as pool:
+        assert pool.apply_async(_halves_in_a_child).get(timeout=60) == [1] * 10

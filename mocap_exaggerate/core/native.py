@@ -32,6 +32,17 @@ SHARE_FROM = 4096
 _helper = None
 
 
+def _forget_helper() -> None:
+    """In a child made by fork: the parent's helper thread was not copied, so its executor would take work
+    and never do it (a worker forked from a process that had converted a long clip hung)."""
+    global _helper
+    _helper = None
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_helper)
+
+
 def frame_halves(frames: int, *, per_item: int = 1) -> list[slice]:
     """``range(frames)`` as two halves where a second core can take one (a long clip), else as one slice.
     ``per_item``: how many frames' work each item is (for items that are not frames)."""
