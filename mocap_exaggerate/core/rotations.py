@@ -250,6 +250,13 @@ def quat_from_axis_angle(axis: str, angle: np.ndarray) -> np.ndarray:
     return q
 
 
+def _axes(order: str) -> tuple[int, int, int, int]:
+    """The axes ``i, j, k`` (0, 1, 2 for X, Y, Z) of a Tait-Bryan order such as ``"ZXY"``, and its parity:
+    +1 when ``ijk`` is a cyclic permutation of ``XYZ``, else -1."""
+    i, j, k = ("XYZ".index(a) for a in order.upper())
+    return i, j, k, 1 if (j - i) % 3 == 1 else -1
+
+
 def quat_from_euler(euler: np.ndarray, order: str) -> np.ndarray:
     """Quaternions from intrinsic Euler angles in degrees.
 
@@ -269,8 +276,7 @@ def quat_from_euler(euler: np.ndarray, order: str) -> np.ndarray:
         q = quat_from_axis_angle(order[0], radians[..., 0])
         q = quat_mul(q, quat_from_axis_angle(order[1], radians[..., 1]))
         return quat_mul(q, quat_from_axis_angle(order[2], radians[..., 2]))
-    i, j, k = ("XYZ".index(a) for a in order)
-    parity = 1.0 if (j - i) % 3 == 1 else -1.0
+    i, j, k, parity = _axes(order)
     half = 0.5 * radians
     c, s = np.cos(half), np.sin(half)
     c1, c2, c3 = c[..., 0], c[..., 1], c[..., 2]
@@ -298,8 +304,7 @@ def quat_from_joint_euler(euler: np.ndarray, orders: list[str], *, compiled: boo
     for j, order in enumerate(orders):
         order = order.upper()
         if len(set(order)) == 3:
-            i, k, m = ("XYZ".index(a) for a in order)
-            codes[j] = (i, k, m, 1 if (k - i) % 3 == 1 else -1)
+            codes[j] = _axes(order)
     kernel = (compiled and _kernels is not None and euler.ndim == 3 and euler.shape[1:] == (len(orders), 3)
               and len(orders) > 0)
     if kernel:
@@ -385,8 +390,7 @@ def _euler_from_quat(q: np.ndarray, order: str) -> np.ndarray:
     `_matrix_entry`, as `quat_to_matrix` makes them (the same bits as from the whole matrix, 40 % less work).
     """
     parts = _parts(q)
-    i, j, k = ("XYZ".index(a) for a in order)
-    sign = 1.0 if (j - i) % 3 == 1 else -1.0
+    i, j, k, sign = _axes(order)
     ii, ij = _matrix_entry(parts, i, i), _matrix_entry(parts, i, j)
     b = np.arctan2(sign * _matrix_entry(parts, i, k), np.hypot(ii, ij))
     a = np.arctan2(-sign * _matrix_entry(parts, j, k), _matrix_entry(parts, k, k))
