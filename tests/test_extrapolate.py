@@ -163,6 +163,32 @@ def test_no_joint_moves_faster_than_max_speed_times_its_own_top_captured_speed(s
     assert np.abs(out - world).mean() > 0.6 * np.abs(free - world).mean()
 
 
+
+@pytest.mark.xfail(strict=True, reason="known: the speed limit's margin is taken on every frame (docs/status.md)")
+def test_a_fast_moment_calms_only_itself_not_the_rest_of_the_clip():
+    """The speed limit should be local: a flick at one moment should leave other joints, and frames far
+    from it, as they were. Its margin of 0.98 is taken on every frame of every pass, over or not, so
+    one fast frame calms every joint of the whole clip by 2 % a pass. Taking it only where a step is
+    over keeps 4 % more of calm frames' exaggeration on the shared clips, which tips the looney amc2bvh
+    jump's rubber forearm, bowed deeper than its length, past the quality bar for twist flips (57.9 ->
+    60.6 degrees in a frame): that bow needs its own bound first."""
+    # Slow swings (a 600-frame period against sigma 12): exaggerated about 1.03x, well within the limit.
+    t = np.arange(1200.0)[:, None, None]
+    world = 40.0 * np.sin(2 * np.pi * t / 600.0 + np.arange(3.0)[None, :, None]) * np.array([1.0, 0.5, 0.2])
+    settings = dict(sigma=12.0, omega=5.0, smooth=6.0, max_speed=1.75)
+    before = extrapolate(world, **settings)
+    assert np.allclose(before, extrapolate(world, **(settings | {"max_speed": 0.0})))  # nothing was over
+    jerked = world.copy()  # one joint's quick flick (a fifth of a second)
+    jerked[:, 1, 0] += 20.0 * np.exp(-0.5 * ((np.arange(1200.0) - 600.0) / 5.0) ** 2)
+    after = extrapolate(jerked, **settings)
+    assert not np.allclose(after, extrapolate(jerked, **(settings | {"max_speed": 0.0})))  # the flick was over
+    top = np.linalg.norm(np.diff(jerked, axis=0), axis=-1).max(axis=0)
+    assert np.linalg.norm(np.diff(after, axis=0), axis=-1).max(axis=0)[1] <= 1.75 * top[1] * (1 + 1e-9)
+    reach = 48 + 4 * (2 * 4 + 1) + 1  # the band (4 sigma) and the limit's passes (radius sigma / 3 each side)
+    far = np.r_[: 600 - reach, 600 + reach + 1 : len(world)]
+    assert np.array_equal(after[:, [0, 2]], before[:, [0, 2]])
+    assert np.allclose(after[far, 1], before[far, 1], rtol=0.0, atol=1e-9)
+
 def test_a_joint_standing_still_stays_where_it_was_captured():
     fps, sigma = 120.0, 0.3 * 120
     t = np.arange(0.0, 6.0, 1.0 / fps)

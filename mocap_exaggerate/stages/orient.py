@@ -209,8 +209,8 @@ def _calm_riders(world, new_pos, source_rot, source_pos, skeleton, rigid, max_sp
         for _ in range(_RIDER_PASSES):
             placed = quat_rotate(quat_pow(turn, gain)[:, None], offsets) + new_pos[:, p : p + 1]
             step = vector_norm(np.diff(placed, axis=0))  # (F-1, riders)
-            share = np.min(np.where(step > budget, budget / np.maximum(step, 1e-300), 1.0), axis=1) * 0.98
-            if share.min() >= 0.98:
+            share = np.min(np.where(step > budget, 0.98 * budget / np.maximum(step, 1e-300), 1.0), axis=1)
+            if share.min() >= 1.0:  # (only the frames over the budget are calmed, a little under it)
                 break
             gain = gain * step_gain(share, radius)
         if gain.min() < 1.0:
