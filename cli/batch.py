@@ -37,7 +37,9 @@ def batch_options(options: dict[str, Any], *, overwrite: bool, resume: bool):
         return str(Path(path).resolve()) if path else ""
 
     glb = dataclasses.replace(settings, skin=absolute(settings.skin), joint_map=absolute(settings.joint_map))
-    return BatchOptions(dataclasses.replace(config, glb=glb), preset=preset, overwrite=overwrite, resume=resume)
+    config_file = options.get("config_file")
+    return BatchOptions(dataclasses.replace(config, glb=glb), preset=preset, overwrite=overwrite, resume=resume,
+                        protect=(absolute(str(config_file)),) if config_file is not None else ())
 
 
 def run_reported(clips, out_dir: Path, options, *, jobs: int, as_json: bool, problems=(),

@@ -151,7 +151,8 @@ def compare(input_path: Path, output: Path, count: int, start: float, seconds: f
     from_stdin = str(input_path) == "-"
     _, ran = write_compare(sys.stdin.buffer if from_stdin else input_path, output, cells, columns=columns,
                            frames=count, start=start, seconds=seconds, overwrite=overwrite,
-                           label="<stdin>" if from_stdin else None)
+                           label="<stdin>" if from_stdin else None,
+                           protect=(options["config_file"],) if options.get("config_file") is not None else ())
     if not quiet():
         click.echo(f"wrote {output}", err=True)
     clip = "-" if from_stdin else str(input_path)

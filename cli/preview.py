@@ -47,6 +47,6 @@ def preview(input_path: Path, output: Path, count: int, trajectory: str | None, 
     from_stdin = str(input_path) == "-"
     write_preview(sys.stdin.buffer if from_stdin else input_path, output, config, frames=count, overwrite=overwrite,
                   label="<stdin>" if from_stdin else None, trajectory=trajectory, start=start, seconds=seconds,
-                  )
+                  protect=(options["config_file"],) if options["config_file"] is not None else ())
     if not quiet():
         click.echo(f"wrote {output}", err=True)

@@ -348,8 +348,17 @@ CASES = {
     "a tls scheduler without certificates": lambda t, c, o: (["batch", t, o, "--scheduler", "tls://127.0.0.1:8786"],
                                                              2, "certificates"),
     "a ucx scheduler": lambda t, c, o: (["batch", t, o, "--scheduler", "ucx://127.0.0.1:8786"], 2, "ucx"),
+    # The pipeline file is read by its content, so it may have any name: a picture must not land on it.
+    "a preview onto its --config": lambda t, c, o: (["preview", c, "--config", _text(t / "cfg.png", OMEGA_3),
+                                                     "-o", t / "cfg.png", "--overwrite"], 2, "would overwrite the input"),
+    "a compare onto its --config": lambda t, c, o: (["compare", c, "--config", _text(t / "cfg.html", OMEGA_3),
+                                                     "-o", t / "cfg.html", "--overwrite", "--omega", "2,3"], 2,
+                                                    "would overwrite the input"),
 
 }
+
+
+OMEGA_3 = "[extrapolate]\nomega = 3\n"
 
 
 def _text(path, text):
@@ -444,6 +453,24 @@ def test_one_clean_line_and_nothing_lost(tmp_path, case):
         assert len(lines[0]) < 1000, lines[0][:200]  # a long value is quoted short
         assert words.lower() in lines[0].lower(), lines[0]
         assert (snapshot(out) if out.exists() else None) == out_before, "a refused run wrote into the output folder"
+
+
+def test_a_batch_never_writes_over_the_pipeline_file_it_was_given(tmp_path):
+    """Rebuilding a library from one of its own pipeline files: the clip whose output that file is
+    fails alone, and the file is as it was (it was replaced, with exit 0)."""
+    library = tmp_path / "lib"
+    library.mkdir()
+    (library / "clip.bvh").write_bytes(CLIP.read_bytes())
+    (library / "jump.bvh").write_bytes((SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh").read_bytes())
+    out = tmp_path / "out"
+    assert run("batch", library, out, "-j", "1", "-q", "--omega", "3", *FAST).returncode == 0
+    given = out / "clip.pipeline.toml"
+    before = given.read_bytes()
+    done = run("batch", library, out, "-j", "1", "--config", given, "--overwrite", "--omega", "2", *FAST)
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert f"would overwrite the input {given}" in done.stderr
+    assert given.read_bytes() == before
+    assert "--omega 2" not in before.decode() and "omega = 2.0" in (out / "jump.pipeline.toml").read_text()
 
 
 def test_a_tiny_delta_reports_the_frames_it_could_not_correct(tmp_path):

@@ -45,6 +45,8 @@ class BatchOptions:
     overwrite : replace existing outputs; without it (or resume) a clip whose outputs
         exist fails, saying so
     report : also draw each clip's pictures for the batch's report (`mocap_exaggerate.viz.report`)
+    protect : more files no clip's outputs may land on (the pipeline file the config was read from);
+        absolute paths, as the skin's
     """
 
     config: PipelineConfig
@@ -52,6 +54,7 @@ class BatchOptions:
     overwrite: bool = False
     resume: bool = False
     report: bool = False
+    protect: tuple[str, ...] = ()
 
 
 @dataclass

@@ -279,10 +279,11 @@ def render_grid_html(motion: Motion, ran: list[Ran], *, skin: Skin | None = None
 def write_compare(source, output: str | os.PathLike, cells: list[Cell], *, columns: int, frames: int = 3,
                   start: float = 0.0, seconds: float | None = None, max_fps: float = MAX_FPS,
                   overwrite: bool = False, skin=None, joint_map=None, config=None,
-                  label: str | None = None) -> tuple[Path, list[Ran]]:
+                  label: str | None = None, protect: tuple = ()) -> tuple[Path, list[Ran]]:
     """Run ``cells`` on a clip (path, bytes or stream) and write their grid to ``output`` (by its suffix,
     `COMPARE_SUFFIXES`); the runs, for their figures and command lines. ``config`` (the first cell's by
-    default) says how the clip is read and which character is drawn (``skin`` and ``joint_map`` over it)."""
+    default) says how the clip is read and which character is drawn (``skin`` and ``joint_map`` over it);
+    ``protect``: more files the output must not land on (the pipeline file it was read from)."""
     import shutil
 
     from ..io.files import atomic_write
@@ -300,7 +301,7 @@ def write_compare(source, output: str | os.PathLike, cells: list[Cell], *, colum
     if len(cells) > MAX_CELLS:
         raise ConfigError(f"{len(cells)} settings to compare; at most {MAX_CELLS} (each is a run of the pipeline)")
     motion, body, where = clip_and_character(source, {"compare": output}, config or cells[0].config, skin=skin,
-                                             joint_map=joint_map, overwrite=overwrite, label=label)
+                                             joint_map=joint_map, overwrite=overwrite, label=label, protect=protect)
     ran = run_cells(motion, cells)
     if suffix == ".png":
         data = render_grid_png(motion, ran, columns=columns, frames=frames, start=start, seconds=seconds, skin=body)

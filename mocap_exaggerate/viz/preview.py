@@ -43,20 +43,21 @@ def joint_named(skeleton: Skeleton, name: str, where: str = "the clip") -> int:
 
 
 def clip_and_character(source, targets: dict, config, *, skin=None, joint_map=None, overwrite: bool = False,
-                       label: str | None = None):
+                       label: str | None = None, protect: tuple = ()):
     """What a picture of a clip starts from: the clip read (``config.input``), the body drawn bound to it
     (the GLB's: ``config.glb``'s character with ``skin`` and ``joint_map`` over it, a glTF clip's own mesh
     where none is named) and how to name the clip in messages; the ``targets`` (kind -> path) checked first
     (never an input; taken only with ``overwrite``), as a job's. What the reading and the binding warn of
     (a frame count the file contradicts, parts of the clip no joint of the character pairs with) is logged
-    as warnings, as ``exaggerate`` says them."""
+    as warnings, as ``exaggerate`` says them. ``protect``: more files never written over (the pipeline file
+    the config came from)."""
     from ..io.gltf_motion import is_gltf
     from ..jobs.job import Character, binding_warnings, check_targets, read_clip
 
     if is_gltf(source) and skin is None and not config.glb.skin:
         skin = Path(source)  # a game character is drawn with its own mesh, as exaggerate writes it
     character = Character.of(config.glb, glb=True, skin=skin, joint_map=joint_map, units=None, influences=None)
-    inputs = [Path(p) for p in (source, character.skin_file, character.map_file)
+    inputs = [Path(p) for p in (source, character.skin_file, character.map_file, *protect)
               if isinstance(p, (str, os.PathLike)) and str(p) != "-"]
     check_targets(targets, inputs, overwrite)
     motion, report = read_clip(source, config.input, name=label)
@@ -85,7 +86,7 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
                   label: str | None = None, trajectory: str | None = None, start: float = 0.0,
                   seconds: float | None = None, max_fps: float = MAX_FPS,
                   skin: Skin | str | os.PathLike | None = None,
-                  joint_map: dict[str, str] | str | os.PathLike | None = None) -> Path:
+                  joint_map: dict[str, str] | str | os.PathLike | None = None, protect: tuple = ()) -> Path:
     """Run the pipeline on a clip (path, bytes or stream) and write its preview to ``output``.
 
     By the suffix: ``.png`` the body at ``frames`` evenly spaced frames (`render_preview`), or
@@ -97,6 +98,7 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     checked (never an input; taken only with ``overwrite``) before the clip is run. ``skin``
     (a `Skin` or a skin file, with ``joint_map``, pairs or a joint map file, for joints the pairing misses) is the body drawn,
     bound to the clip as the GLB's is (`mocap_exaggerate.rig.binding`); default: the capsule body.
+    ``protect``: more files the output must not land on (the pipeline file ``config`` was read from).
     """
     from ..config import DEFAULT_PRESET, load_preset
     from ..io.files import atomic_write
@@ -106,7 +108,7 @@ def write_preview(source, output: str | os.PathLike, config=None, *, frames: int
     kind = _kind(output, trajectory)
     config = config or load_preset(DEFAULT_PRESET)
     motion, skin, where = clip_and_character(source, {"preview": output}, config, skin=skin, joint_map=joint_map,
-                                             overwrite=overwrite, label=label)
+                                             overwrite=overwrite, label=label, protect=protect)
     joint = joint_named(motion.skeleton, trajectory, where) if trajectory is not None else None
     result = run(motion, config)
     if kind == ".gif":
