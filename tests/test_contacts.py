@@ -28,7 +28,7 @@ from mocap_exaggerate.stages.contacts import (
 )
 from mocap_exaggerate.stages.stretch import StretchSpec
 
-from .helpers import shared
+from .helpers import SAMPLE_DIR, shared
 
 # A hand-made leg: hips, thigh, knee, ankle; the foot stands still on the floor for the first
 # 40 frames while the hips bob, then lifts.
@@ -449,3 +449,17 @@ def test_a_boxer_kneeling_at_looney_keeps_his_thighs_and_his_height():
     assert thigh.max() < config.springs.max_stretch
     height = motion.skeleton.height()
     assert np.max(out[2920:2945, hip, 1] - captured[2920:2945, hip, 1]) < 0.1 * height
+
+
+@pytest.mark.parametrize("preset", ["subtle", "cartoon", "looney"])
+def test_a_clip_held_still_stays_still_and_warns_of_nothing(preset):
+    """One pose held for 200 frames: nothing to exaggerate, every point still, and no 0 / 0 on the way
+    (the contacts' easing divided a still foot's steps by its captured top speed, 0: a RuntimeWarning,
+    which ``python -W error`` and this suite's settings turn into an error)."""
+    lines = (SAMPLE_DIR / "cmu_09_01_run_daz.bvh").read_text().splitlines()
+    motion_at = lines.index("MOTION")
+    held = lines[: motion_at + 1] + ["Frames: 200", lines[motion_at + 2]] + [lines[motion_at + 40]] * 200
+    motion, _ = read_bvh("\n".join(held).encode() + b"\n")
+    result = run(motion, load_preset(preset))
+    positions = result.world_positions[:, result.original_index]
+    assert np.abs(positions - motion.world_positions()).max() < 1e-6 * motion.skeleton.height()

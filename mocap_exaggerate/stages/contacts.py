@@ -485,7 +485,10 @@ def ease_lengths(runs: np.ndarray, paths: np.ndarray, shift: np.ndarray, limits:
             own = vector_norm(np.diff(paths[reach], axis=0))  # (d-1, k)
             eased = paths[reach][None] + weights[:, :, None, None] * shift[reach][None, :, None, :]
             steps = vector_norm(np.diff(eased, axis=1))  # (R, d-1, k)
-            worst = (steps / np.maximum(own, limits)[None]).max(axis=(1, 2))
+            allowed = np.broadcast_to(np.maximum(own, limits)[None], steps.shape)
+            # (a point that never moves, in a clip held still, may not move at all: 0 / 0 fits)
+            ratio = np.divide(steps, allowed, out=np.where(steps > 0, np.inf, 0.0), where=allowed > 0)
+            worst = ratio.max(axis=(1, 2))
             fits = np.flatnonzero(worst <= 1.0 + 1e-9)
             out[row, side] = lengths[fits[0]] if len(fits) else lengths[int(np.argmin(worst))]
     return out
