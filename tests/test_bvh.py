@@ -346,3 +346,28 @@ def test_a_file_cut_inside_the_hierarchy_says_so(tmp_path):
     with pytest.raises(InputError, match=r"CHANELS") as caught:
         read_bvh(broken)
     assert "truncated" not in str(caught.value)
+
+
+@pytest.mark.parametrize("name, text, error", [
+    ("numbers on one OFFSET line", "HIERARCHY\nROOT r\n{\nOFFSET " + "1 " * 2_000_000 + "\n}\n", ":4: unexpected '1'"),
+    ("channel names on one line", "HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Yrotation Zrotation"
+     + " Xrotation" * 1_000_000 + "\n}\n", ":5: CHANNELS says 3 but lists more than 67"),
+    ("End Sites on one joint", "HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\n" + "End Site\n{\nOFFSET 0 1 0\n}\n" * 200_000
+     + "}\nMOTION\nFrames: 1\nFrame Time: 0.1\n\n", ":9: joint 'r' has a second End Site"),
+    ("words in a joint's name", "HIERARCHY\nROOT " + "r " * 1_000_000 + "{\n", ":2: more than 64 words"),
+])
+def test_a_flood_in_the_hierarchy_is_refused_at_its_first_wrong_word_in_little_memory(name, text, error):
+    """The hierarchy's words are read one at a time: split into lists whole, 50 million numbers on
+    an OFFSET line took 60 times the file (6.2 GB for 100 MB) before the refusal."""
+    import tracemalloc
+
+    data = text.encode()
+    tracemalloc.start()
+    try:
+        with pytest.raises(InputError) as caught:
+            read_bvh(data, name="flood.bvh")
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert str(caught.value).startswith("flood.bvh" + error), str(caught.value)[:200]
+    assert peak < 3 * len(data), (name, peak / len(data))
