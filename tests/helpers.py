@@ -92,6 +92,14 @@ MALFORMED = {
     "nan value": (make_bvh(SIMPLE, "Frames: 1\nFrame Time: 0.1\n1 2 nan 4 5 6 7 8 9\n"), 19, "nan"),
     "end site without offset": (make_bvh(SIMPLE.replace("      OFFSET 0 1 0\n    }", "    }")), 12, "OFFSET"),
     "joint without offset": (make_bvh(SIMPLE.replace("    OFFSET 0 1 0\n    CHANNELS 3", "    CHANNELS 3")), 13, "OFFSET"),
+    # Plain decimals only, as every other number in a file (Python's int() and float() take these too).
+    "frames with an underscore": (make_bvh(SIMPLE, "Frames: 1_0\nFrame Time: 0.1\n"), 17, "'1_0' is not a whole"),
+    "frames in another script's digits": (make_bvh(SIMPLE, "Frames: \u0661\nFrame Time: 0.1\n"), 17,
+                                          "'\u0661' is not a whole"),
+    "frame time with an underscore": (make_bvh(SIMPLE, "Frames: 1\nFrame Time: 0.008_333\n1 2 3 4 5 6 7 8 9\n"), 18,
+                                      "'0.008_333' is not a number"),
+    "an offset in another script's digits": (make_bvh(SIMPLE.replace("OFFSET 0 1 0\n    CHANNELS",
+                                                                     "OFFSET 0 \u0661 0\n    CHANNELS")), 8, "OFFSET"),
 }
 
 

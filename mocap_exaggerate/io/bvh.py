@@ -54,7 +54,8 @@ _WHITESPACE = np.zeros(256, dtype=bool)
 _WHITESPACE[[9, 10, 11, 12, 13, 32]] = True
 
 #: A number as BVH exporters write it (no digit separators, hex or words); nan/inf are caught apart.
-_NUMBER_RE = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+_NUMBER_RE = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$", re.ASCII)
+_WHOLE_RE = re.compile(r"^[+-]?[0-9]+$")
 #: Largest magnitude accepted for an offset or a channel value: far beyond any capture
 #: (a kilometre in millimetres is 1e6), small enough that squares and sums stay finite.
 MAX_VALUE = 1e9
@@ -170,7 +171,7 @@ def read_bvh(
                 raise InputError(f"missing '{what}:' line after MOTION", source=label, line=line_no)
             end = _line_end(data, pos)
             line_no += 1
-            line = data[pos:end].decode("latin-1")
+            line = _decode(data[pos:end], label)
             pos = end
             if line.strip():
                 break
@@ -179,10 +180,9 @@ def read_bvh(
             if not m:
                 raise InputError(f"expected 'Frames: <count>', found {line.strip()!r}", source=label, line=line_no)
             count = m.group(1)
-            try:
-                declared_frames = int(count) if len(count) <= 18 else MAX_FRAMES + 1
-            except ValueError:
-                raise InputError(f"frame count {count[:20]!r} is not a whole number", source=label, line=line_no) from None
+            if not _WHOLE_RE.match(count):  # (plain digits: Python's int() also takes 1_000 and other scripts' digits)
+                raise InputError(f"frame count {count[:20]!r} is not a whole number", source=label, line=line_no)
+            declared_frames = int(count) if len(count) <= 18 else MAX_FRAMES + 1
             if declared_frames < 0:
                 raise InputError(f"frame count {declared_frames} is negative", source=label, line=line_no)
             if declared_frames > MAX_FRAMES:
@@ -194,10 +194,9 @@ def read_bvh(
             m = _FRAME_TIME_RE.match(line)
             if not m:
                 raise InputError(f"expected 'Frame Time: <seconds>', found {line.strip()!r}", source=label, line=line_no)
-            try:
-                frame_time = float(m.group(1))
-            except ValueError:
-                raise InputError(f"frame time {m.group(1)!r} is not a number", source=label, line=line_no) from None
+            if not _NUMBER_RE.match(m.group(1)):  # (a plain decimal, as every other number in the file)
+                raise InputError(f"frame time {m.group(1)[:20]!r} is not a number", source=label, line=line_no)
+            frame_time = float(m.group(1))
             if fps is None and not (np.isfinite(frame_time) and FPS_RANGE[0] <= 1.0 / max(frame_time, 1e-300) <= FPS_RANGE[1]):
                 raise InputError(
                     f"frame time {m.group(1)} is not a frame rate between {FPS_RANGE[0]:g} and {FPS_RANGE[1]:g} fps "
