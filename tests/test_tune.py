@@ -179,3 +179,20 @@ def test_a_setting_from_a_pipeline_file_in_frames_is_run_and_copied_as_read(tmp_
         assert written_glb(answer["command"], tmp_path / "out") == base64.b64decode(answer["glb"])
     finally:
         server.stop()
+
+
+def test_a_browser_that_goes_away_mid_answer_is_not_a_traceback(tuning):
+    """A reload, a closed tab or a slider's aborted request drops the connection while the page is sent
+    (each was a socketserver traceback on the terminal): nothing is said, and the tuner goes on."""
+    import socket
+
+    host, port = tuning.url.removeprefix("http://").strip("/").split(":")
+    for _ in range(3):
+        with socket.create_connection((host, int(port)), timeout=30) as client:
+            client.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")  # RST on close
+            client.sendall(f"GET / HTTP/1.1\r\nHost: {host}:{port}\r\n\r\n".encode())
+            client.recv(16)  # the answer has begun: go away in the middle of it
+    status, answer = tuning.post({"preset": "looney"})
+    assert status == 200 and "error" not in answer
+    code, said = tuning.stop()
+    assert code == 0 and said.strip() == "stopped", said

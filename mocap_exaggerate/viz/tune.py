@@ -14,6 +14,7 @@ import base64
 import json
 import math
 import shlex
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -225,6 +226,14 @@ class TuneServer(ThreadingHTTPServer):
     @property
     def url(self) -> str:
         return f"http://127.0.0.1:{self.server_address[1]}/"
+
+    def handle_error(self, request, client_address) -> None:
+        """A browser that goes away mid-answer (a reload, a closed tab, a slider's aborted request) is
+        normal: nothing is said. Anything else is one line, not socketserver's traceback."""
+        error = sys.exc_info()[1]
+        if isinstance(error, ConnectionError):
+            return
+        print(f"tune: a request failed: {type(error).__name__}: {str(error)[:200]}", file=sys.stderr)
 
     def hosts(self) -> set[str]:
         """The Host headers a request of this machine's browser carries (another is a page elsewhere
