@@ -23,7 +23,7 @@ from mocap_exaggerate.core.errors import MocapError, printable
 from mocap_exaggerate.io.files import OutputExistsError
 
 __all__ = ["cli", "UserError", "INTERNAL_ERROR", "fail_cleanly", "verbosity_options", "quiet", "shown", "one_line",
-           "printable"]
+           "printable", "emit"]
 
 log = logging.getLogger("mocap_exaggerate")
 
@@ -71,6 +71,15 @@ def fail_cleanly(func: Callable) -> Callable:
 def shown(text: str, most: int = 80) -> str:
     """``text`` quoted for a message, cut short when it is long."""
     return repr(text) if len(text) <= most else repr(text[:most]) + f"... ({len(text)} characters)"
+
+
+def emit(text: str, *, nl: bool = True) -> None:
+    """Write ``text`` to standard output for another program (a job list, a command to run): piped, its
+    bytes exactly (click's echo would strip what looks like a terminal's escape sequence, and a clip
+    named with one would become another clip's command); on a terminal, its control characters escaped
+    (`printable`), so a name cannot drive the terminal."""
+    shown_text = printable(text, keep=" \0") if click.get_text_stream("stdout").isatty() else text
+    click.echo(shown_text, nl=nl, color=True)
 
 
 def one_line(message: str, most: int = _LONGEST_MESSAGE) -> str:

@@ -11,7 +11,7 @@ import click
 
 from mocap_exaggerate.core.errors import MocapError
 
-from .app import UserError, cli, fail_cleanly, quiet, shown, verbosity_options
+from .app import UserError, cli, emit, fail_cleanly, printable, quiet, shown, verbosity_options
 from .options import FilePath, config_from_options, picture_options, run_options_command
 
 #: The options of a run, as ``exaggerate`` reads them: each cell's words are parsed by this command.
@@ -154,9 +154,9 @@ def compare(input_path: Path, output: Path, count: int, start: float, seconds: f
                            label="<stdin>" if from_stdin else None,
                            protect=(options["config_file"],) if options.get("config_file") is not None else ())
     if not quiet():
-        click.echo(f"wrote {output}", err=True)
+        click.echo(printable(f"wrote {output}"), err=True)
     clip = "-" if from_stdin else str(input_path)
     for r in ran:
         f = r.figures
-        click.echo(f"# {r.cell.label}: stretch {f['stretch']}, jerk {f['jerk']}, speed limit took {f['limit']}")
-        click.echo(shlex.join(["mocap-exaggerate", "exaggerate", clip, "-o", "out", *r.cell.words]))
+        emit(f"# {r.cell.label}: stretch {f['stretch']}, jerk {f['jerk']}, speed limit took {f['limit']}")
+        emit(shlex.join(["mocap-exaggerate", "exaggerate", clip, "-o", "out", *r.cell.words]))

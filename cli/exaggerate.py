@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from .app import UserError, cli, fail_cleanly, quiet, verbosity_options
+from .app import UserError, cli, fail_cleanly, printable, quiet, verbosity_options
 from .batch import batch_options, run_reported
 from .options import FilePath, config_from_options, folder_argument, output_options, pipeline_options
 
@@ -88,9 +88,9 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
         extras = ", ".join(suffixes[k] for k in written if k in suffixes)
         frames = f"{record.frames} frame{'s' * (record.frames != 1)}"
         joints = f"{record.joints} joint{'s' * (record.joints != 1)}"
-        click.echo(
+        click.echo(printable(
             f"wrote {written['bvh']}{', ' + extras if extras else ''} and {written['manifest'].name}: "
-            f"{frames}, {joints}, max link stretch {record.max_link_stretch:.2f}x, {record.seconds:.2f} s",
+            f"{frames}, {joints}, max link stretch {record.max_link_stretch:.2f}x, {record.seconds:.2f} s"),
             err=True,
         )
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from .app import cli, fail_cleanly, verbosity_options
+from .app import cli, emit, fail_cleanly, verbosity_options
 from .batch import batch_options, find_batch_clips
 from .options import folder_arguments, given_options, output_options, pipeline_options
 
@@ -31,7 +31,8 @@ def plan(in_dir: Path, out_dir: Path, pattern: str, overwrite: bool, print0: boo
     options given here (paths made absolute, quoted for the shell); feed the
     lines to Deadline, OpenCue, a Slurm array or xargs. Nothing is converted
     or written. A clip whose path holds a line break cannot be one line: it is
-    left out with a warning unless --print0 or --json is given.
+    left out with a warning unless --print0 or --json is given; one whose name
+    has control characters, which no output may have, is left out of all three.
 
     \b
     Examples:
@@ -49,8 +50,16 @@ def plan(in_dir: Path, out_dir: Path, pattern: str, overwrite: bool, print0: boo
     for problem in problems:
         log.warning("%s: %s", problem.input, problem.error)
     given = given_options(click.get_current_context(), exclude={"pattern", "print0", "as_json"})
+    from mocap_exaggerate.core.errors import ConfigError
+    from mocap_exaggerate.jobs.job import check_name
+
     jobs = []
     for clip in clips:
+        try:
+            check_name(clip.name)
+        except ConfigError as error:  # (its command would only be refused on the farm)
+            log.warning("%s: %s; left out (rename it)", clip.source, error)
+            continue
         folder = (out_dir / clip.relative.parent).absolute()
         argv = ["mocap-exaggerate", "exaggerate", str(clip.source.absolute()), "-o", str(folder),
                 "--name", clip.name, *given]
@@ -63,6 +72,4 @@ def plan(in_dir: Path, out_dir: Path, pattern: str, overwrite: bool, print0: boo
         click.echo(json.dumps(jobs, indent=1, ensure_ascii=False))
     else:
         for job in jobs:
-            click.echo(shlex.join(job["argv"]), nl=not print0)
-            if print0:
-                click.echo("\0", nl=False)
+            emit(shlex.join(job["argv"]) + ("\0" if print0 else ""), nl=not print0)

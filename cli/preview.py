@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from .app import cli, fail_cleanly, quiet, verbosity_options
+from .app import cli, fail_cleanly, printable, quiet, verbosity_options
 from .options import FilePath, character_options, config_from_options, picture_options, pipeline_options
 
 
@@ -49,4 +49,4 @@ def preview(input_path: Path, output: Path, count: int, trajectory: str | None, 
                   label="<stdin>" if from_stdin else None, trajectory=trajectory, start=start, seconds=seconds,
                   protect=(options["config_file"],) if options["config_file"] is not None else ())
     if not quiet():
-        click.echo(f"wrote {output}", err=True)
+        click.echo(printable(f"wrote {output}"), err=True)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .app import cli, fail_cleanly, quiet, verbosity_options
+from .app import cli, fail_cleanly, printable, quiet, verbosity_options
 from .options import FilePath, character_options, config_from_options, given_options, pipeline_options
 
 
@@ -65,7 +65,7 @@ def tune(ctx: click.Context, input_path: Path, port: int, **options) -> None:
 
     def ready(url: str) -> None:
         if not quiet():
-            click.echo(f"tuning {input_path} at {url} (Ctrl-C stops)", err=True)
+            click.echo(printable(f"tuning {input_path} at {url} (Ctrl-C stops)"), err=True)
 
     serve(server, tuner, ready)
     if not quiet():

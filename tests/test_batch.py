@@ -413,6 +413,26 @@ def test_plan_prints_one_command_per_clip_that_makes_what_batch_makes(tmp_path):
                 == (tmp_path / "batch" / "jumps" / f"jump{suffix}").read_bytes())
 
 
+def test_a_clip_in_a_folder_named_with_a_terminals_escape_sequence_is_planned_as_itself(tmp_path):
+    """Two folders whose names differ only by an escape sequence: piped, each job names its own clip, its
+    bytes as they are (click's echo stripped what looked like a terminal's escape, and both lines named
+    the same clip, the other never converted); the command that runs it shows the sequence escaped,
+    never obeys it. A clip whose own name has one (no output may be named so) is left out, said once."""
+    folder = tmp_path / "in"
+    for sub in ("x", "x\x1b[0m"):
+        (folder / sub).mkdir(parents=True)
+        shutil.copy(RUN, folder / sub / "a.bvh")
+    shutil.copy(JUMP, folder / "b\x1b[2J.bvh")
+    for form in ([], ["--print0"]):
+        planned = command("plan", folder, tmp_path / "farm", "--no-glb", *form)
+        assert planned.returncode == 0, planned.stderr
+        jobs = [shlex.split(line) for line in planned.stdout.split("\0" if form else "\n") if line]
+        assert sorted(words[2] for words in jobs) == sorted(str(folder / sub / "a.bvh") for sub in ("x", "x\x1b[0m"))
+        assert "b\\x1b[2J.bvh" in planned.stderr and "left out" in planned.stderr and "\x1b" not in planned.stderr
+    ran = command(*next(words for words in jobs if "\x1b" in words[4])[1:])
+    assert ran.returncode == 0 and "\x1b" not in ran.stderr and "x\\x1b[0m" in ran.stderr, ran.stderr
+
+
 HOSTILE_NAMES = ["it's [a] dir/jump \"ü\" x.bvh", "run $(touch PWNED) `id` ; *.bvh"]
 
 
@@ -466,8 +486,8 @@ def test_the_readmes_farm_recipes_work_on_any_path(tmp_path):
 
 def test_a_path_with_a_line_break_is_left_out_of_a_line_list_and_kept_in_the_others(tmp_path):
     folder = tmp_path / "in"
-    folder.mkdir()
-    shutil.copy(RUN, folder / "two\nlines.bvh")
+    (folder / "two\nlines").mkdir(parents=True)  # (a clip so named is left out of every form: no output may be)
+    shutil.copy(RUN, folder / "two\nlines" / "run.bvh")
     shutil.copy(JUMP, folder / "jump.bvh")
     lines = command("plan", folder, tmp_path / "out")
     assert lines.returncode == 0 and len(lines.stdout.splitlines()) == 1 and "jump.bvh" in lines.stdout
