@@ -766,7 +766,11 @@ def test_a_batch_shows_clip_names_escaped(tmp_path):
         assert len(done.stdout.splitlines()) == 2  # the JSON lines, one a clip
 
 
-def test_two_batches_into_one_folder_the_second_is_refused(tmp_path):
+@pytest.mark.parametrize("elsewhere", [False, True], ids=["one TMPDIR", "two TMPDIRs"])
+def test_two_batches_into_one_folder_the_second_is_refused(tmp_path, elsewhere):
+    """Also where the second's temporary folder is another (TMPDIR per user, PrivateTmp, containers
+    sharing a volume): both ran into one folder, each exit 0, when the lock was a temporary file."""
+    import os
     import time
 
     folder = tmp_path / "in"
@@ -781,7 +785,11 @@ def test_two_batches_into_one_folder_the_second_is_refused(tmp_path):
         while not list(out.glob("*.json")) and time.monotonic() < deadline:  # converting: a clip is done
             time.sleep(0.05)
         assert first.poll() is None
-        second = run("batch", folder, out, "-j", "1")
+        other = tmp_path / "other tmp"
+        other.mkdir()
+        env = {**os.environ, "TMPDIR": str(other)} if elsewhere else None
+        second = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", str(folder), str(out),
+                                 "-j", "1"], capture_output=True, text=True, timeout=120, env=env)
         assert second.returncode == 2 and "another batch is writing into this folder" in second.stderr, second.stderr
     finally:
         _, said = first.communicate(timeout=300)

@@ -64,11 +64,11 @@ def run_batch(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptio
     finish, starts no more, and raises `BatchInterrupted`; so does a lost scheduler. A second batch
     into the same folder while this one runs is refused (`batch_lock`).
     """
-    with batch_lock(out_dir):
-        return _run_batch(clips, out_dir, options, jobs, on_result, scheduler)
+    with batch_lock(out_dir) as lock:
+        return _run_batch(clips, out_dir, options, jobs, on_result, scheduler, lock)
 
 
-def _run_batch(clips, out_dir, options, jobs, on_result, scheduler) -> list[FileResult]:
+def _run_batch(clips, out_dir, options, jobs, on_result, scheduler, lock=None) -> list[FileResult]:
     from .job import check_name
 
     parameters = batch_parameters(options)
@@ -77,6 +77,11 @@ def _run_batch(clips, out_dir, options, jobs, on_result, scheduler) -> list[File
 
     def finished(clip: Clip, result: FileResult) -> None:
         done[clip] = result
+        if lock is not None:
+            try:
+                lock.hold_folder()  # (the first clip has made the folder: hold it as itself)
+            except ConfigError:
+                pass  # (another batch took it first; its temporary folder differs, or it would not have begun)
         if on_result is not None:
             on_result(result)
 
@@ -116,12 +121,57 @@ def _run_batch(clips, out_dir, options, jobs, on_result, scheduler) -> list[File
     return in_order()
 
 
+class _FolderLock:
+    """The output folder held by a batch (`batch_lock`): a lock file in the temporary folder, and the
+    folder's own lock once it exists (seen by a batch whose temporary folder is another: TMPDIR)."""
+
+    def __init__(self, out_dir: str | os.PathLike, handle) -> None:
+        self.out_dir = out_dir
+        self.real = os.path.realpath(out_dir)
+        self.handle = handle
+        self.folder: int | None = None
+
+    def hold_folder(self) -> None:
+        """Take the output folder's own lock where it exists and is not held yet; a ConfigError when
+        another batch holds it."""
+        import fcntl
+
+        if self.folder is not None or not os.path.isdir(self.real):
+            return
+        try:
+            folder = os.open(self.real, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+        except OSError:
+            return
+        try:
+            fcntl.flock(folder, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(folder)
+            raise _busy(self.out_dir) from None
+        except OSError:  # (a file system without locks on folders: the temporary folder's lock stands alone)
+            os.close(folder)
+            return
+        self.folder = folder
+
+    def release(self) -> None:
+        if self.folder is not None:
+            os.close(self.folder)  # (closing releases the lock)
+            self.folder = None
+        self.handle.close()
+
+
+def _busy(out_dir) -> ConfigError:
+    return ConfigError(f"{out_dir}: another batch is writing into this folder; wait for it to end, or choose "
+                       "another output folder")
+
+
 @contextmanager
-def batch_lock(out_dir: str | os.PathLike) -> Iterator[None]:
+def batch_lock(out_dir: str | os.PathLike) -> Iterator[_FolderLock]:
     """Hold the output folder for this batch: a second batch into the same folder (by its real path) is
     refused in one line while the first runs (each clears the other's temporaries as an earlier run's
-    leftovers otherwise). The lock is a file in the system's temporary folder, released when the batch
-    ends or its process does; batches on other machines sharing the folder are not seen."""
+    leftovers otherwise). Two locks: a file in the system's temporary folder, and the output folder's
+    own once it exists (taken at the start, or by `_FolderLock.hold_folder` as soon as the first clip
+    made it), which a batch whose temporary folder is another (TMPDIR) sees too; both are released
+    when the batch ends or its process does. Batches on other machines sharing the folder are not seen."""
     import fcntl
     import hashlib
     import tempfile
@@ -130,12 +180,13 @@ def batch_lock(out_dir: str | os.PathLike) -> Iterator[None]:
     name = hashlib.sha256(os.fsencode(real)).hexdigest()[:24]
     path = Path(tempfile.gettempdir()) / f"mocap-exaggerate-batch-{name}.lock"
     handle = open(path, "a+b")
+    lock = _FolderLock(out_dir, handle)
     try:
         try:
             fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise ConfigError(f"{out_dir}: another batch is writing into this folder; wait for it to end, or "
-                              "choose another output folder") from None
-        yield
+            raise _busy(out_dir) from None
+        lock.hold_folder()
+        yield lock
     finally:
-        handle.close()  # (closing releases the lock)
+        lock.release()
