@@ -66,6 +66,8 @@ def run_reported(clips, out_dir: Path, options, *, jobs: int, as_json: bool, pro
         results = run_batch(clips, out_dir, options, jobs=jobs, on_result=progress, scheduler=scheduler)
     except BatchInterrupted as stop:
         results, pending, reason = stop.results, stop.pending, stop.reason
+        if progress.closed:
+            reason = "standard output closed (the reader of --json went away)"
     finally:
         progress.close()
     if reason:

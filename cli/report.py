@@ -43,6 +43,11 @@ def _echo(line: str, stream: TextIO) -> None:
     click.echo(printable(line), file=stream)
 
 
+class OutputClosed(KeyboardInterrupt):
+    """The reader of ``--json`` went away (``| head``): the batch stops as Ctrl-C stops it (the clips being
+    converted finish, no more start), and says so."""
+
+
 class Progress:
     """Called with each `FileResult` as it finishes."""
 
@@ -52,6 +57,7 @@ class Progress:
         self.stream = stream or sys.stderr
         self.count = 0
         self.frames = 0
+        self.closed = False  # standard output went away (`OutputClosed`)
         self.started = time.perf_counter()
         use_bar = bar if bar is not None else (not quiet and total > 1 and _terminal_width(self.stream) >= 40)
         self.bar = None
@@ -62,11 +68,23 @@ class Progress:
                             bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} files [{elapsed}<{remaining}{postfix}]")
 
     def __call__(self, result: FileResult) -> None:
+        closed = self.closed
+        if self.as_json and not closed:
+            try:
+                click.echo(result.to_json())  # stdout: one line per file, for farm tooling
+            except BrokenPipeError:
+                self.closed = True
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # (nothing more to say there)
+        try:
+            self._say(result)
+        finally:
+            if self.closed and not closed:
+                raise OutputClosed
+
+    def _say(self, result: FileResult) -> None:
         self.count += 1
         if result.status == "converted":
             self.frames += result.frames or 0
-        if self.as_json:
-            click.echo(result.to_json())  # stdout: one line per file, for farm tooling
         said = [f"warning: {result.input}: {w}" for w in result.warnings if log.isEnabledFor(logging.WARNING)]
         said += [f"{result.input}: {n}" for n in result.notes if log.isEnabledFor(logging.INFO)]
         for line in said:

@@ -953,3 +953,23 @@ def test_dask_workers_get_glibc_thresholds_back():
                           capture_output=True, text=True, timeout=60)
     assert done.stdout.split() == ["True", "True"], done.stderr
     assert on_dask.malloc_thresholds() is False or "MALLOC_TRIM_THRESHOLD_" in os.environ  # nothing to do here
+
+
+def test_a_batchs_json_reader_that_goes_away_stops_it_saying_what_is_not_done(tmp_path):
+    """``batch --json | head``: the reader closes standard output; the batch stops as Ctrl-C stops it and
+    says so on standard error, with what --resume would finish (it stopped at once, exit 1, saying
+    nothing: ten of twelve clips left without a word)."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    for index in range(12):
+        (folder / f"clip{index:02}.bvh").write_bytes(CLIP.read_bytes())
+    out = tmp_path / "out"
+    batch = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", str(folder), str(out),
+                              "-j", "1", "--json", *FAST], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    batch.stdout.readline()  # the first clip's line, then the reader goes away
+    batch.stdout.close()
+    said = batch.stderr.read()
+    assert batch.wait(timeout=300) == 1 and "Traceback" not in said, said
+    assert "standard output closed" in said and "not done" in said and "--resume" in said, said
+    done = run("batch", folder, out, "-j", "1", "--resume", "-q", *FAST)
+    assert done.returncode == 0 and len(list(out.glob("*.bvh"))) == 12, done.stderr
