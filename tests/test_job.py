@@ -18,6 +18,8 @@ from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.io.files import OutputExistsError, OutputSet, write_files
 from mocap_exaggerate.pipeline import STAGES, Stage, run
 
+from .helpers import SAMPLE_DIR
+
 FAST = resolve_config("cartoon", None, {"subjoints": {"per_link": 2}})
 
 
@@ -408,3 +410,13 @@ def test_units_guessed_into_an_unlikely_figure_are_said(sample_clip, tmp_path):
     assert record.manifest["outputs"]["units"].startswith("cm (guessed")
     assert not [w for w in convert(small, tmp_path / "given", FAST, units="in").warnings if "GLB units" in w]
     assert not [w for w in convert(sample_clip, tmp_path / "likely", FAST).warnings if "GLB units" in w]
+
+
+def test_a_character_given_with_no_glb_is_said_to_be_unused(tmp_path):
+    """``--no-glb --skin X``: nothing uses the character; said once, not silently dropped."""
+    from mocap_exaggerate.rig.body import default_skin
+
+    motion = read_bvh(SAMPLE_DIR / "cmu_09_01_run_daz.bvh")[0]
+    record = convert(SAMPLE_DIR / "cmu_09_01_run_daz.bvh", tmp_path, glb=False, skin=default_skin(motion.skeleton))
+    assert any("not used" in w and "--no-glb" in w for w in record.warnings), record.warnings
+    assert not any("not used" in w for w in convert(SAMPLE_DIR / "cmu_09_01_run_daz.bvh", tmp_path / "b", glb=False).warnings)

@@ -346,6 +346,8 @@ def convert(
     motion, report = read_clip(source, config.input, name=label, data=data)
     timings["read"] = time.perf_counter() - started
     warnings = list(report.warnings) + changed
+    if not glb and not to_stream and (skin is not None or config.glb.skin):
+        warnings.append("the character (--skin) is not used: no GLB is written (--no-glb)")
     if glb:
         from ..io.units import guessed_units_warning
 
