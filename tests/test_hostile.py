@@ -348,6 +348,8 @@ CASES = {
     "a tls scheduler without certificates": lambda t, c, o: (["batch", t, o, "--scheduler", "tls://127.0.0.1:8786"],
                                                              2, "certificates"),
     "a ucx scheduler": lambda t, c, o: (["batch", t, o, "--scheduler", "ucx://127.0.0.1:8786"], 2, "ucx"),
+    "an input named too long for an output": lambda t, c, o: (["exaggerate", _renamed(c, "a" * 220 + ".bvh"), "-o", o],
+                                                              2, "give another with --name"),
     # The pipeline file is read by its content, so it may have any name: a picture must not land on it.
     "a preview onto its --config": lambda t, c, o: (["preview", c, "--config", _text(t / "cfg.png", OMEGA_3),
                                                      "-o", t / "cfg.png", "--overwrite"], 2, "would overwrite the input"),

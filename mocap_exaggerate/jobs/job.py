@@ -304,7 +304,12 @@ def convert(
     default = _default_name(source)
     if gltf_input and config.input.clip:  # one file, many clips: each its own outputs
         default += "_" + re.sub(r"[^A-Za-z0-9_.-]+", "_", config.input.clip)[:80]
-    stem = check_name(name if name is not None else default)
+    try:
+        stem = check_name(name if name is not None else default)
+    except ConfigError as error:
+        if name is not None:
+            raise
+        raise ConfigError(f"{label}: {error} (named after the input; give another with --name)") from None
     if to_stream:
         targets = {"trails": Path(trails)} if trails is not None else {}
     else:
