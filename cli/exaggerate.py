@@ -53,6 +53,10 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
       mocap-exaggerate exaggerate run.bvh -o again/ --config out/walk.pipeline.toml   # walk's settings
       cat walk.bvh | mocap-exaggerate exaggerate - -o - > walk_cartoon.bvh
     """
+    known = (".bvh", ".glb", ".gltf", ".usd", ".usda", ".usdc", ".fbx")
+    if str(output) != "-" and output.suffix.lower() in known and not output.is_dir():
+        log.warning("%s: -o names a folder (made if needed), and the files go inside it; '-o -' writes the BVH to "
+                    "standard output", printable(str(output)))
     if len(input_paths) > 1:
         return _exaggerate_several(input_paths, output, name, overwrite, trails_path, path_file, options)
     input_path = input_paths[0]

@@ -468,3 +468,13 @@ def test_a_saturated_omega_is_said_with_v_and_not_without(sample_clip, tmp_path)
     assert len(said) == 1 and "extrapolate.max_speed" in said[0] and "%" in said[0], loud.stderr
     quiet = command("exaggerate", sample_clip, "-o", tmp_path / "b", "--no-glb", "--omega", "30", "--no-subjoints")
     assert quiet.returncode == 0 and "speed limit" not in quiet.stderr
+
+
+def test_an_output_named_like_a_file_is_said_to_be_a_folder(tmp_path):
+    """``-o walk_cartoon.bvh`` makes a folder of that name, the files inside: said once (it was silent)."""
+    target = tmp_path / "walk_cartoon.bvh"
+    done = command("exaggerate", SAMPLE_DIR / "cmu_09_01_run_daz.bvh", "-o", target, "--no-glb")
+    assert done.returncode == 0 and "-o names a folder" in done.stderr and "'-o -'" in done.stderr, done.stderr
+    assert (target / "cmu_09_01_run_daz.bvh").is_file()
+    again = command("exaggerate", SAMPLE_DIR / "cmu_09_01_run_daz.bvh", "-o", target, "--no-glb", "--overwrite")
+    assert again.returncode == 0 and "names a folder" not in again.stderr  # a folder already: nothing to say
