@@ -363,6 +363,14 @@ CASES = {
 OMEGA_3 = "[extrapolate]\nomega = 3\n"
 
 
+def _copies(folder, count):
+    """A folder of ``count`` copies of the sample clip (a batch's library)."""
+    folder.mkdir()
+    for index in range(count):
+        (folder / f"clip{index:02}.bvh").write_bytes(CLIP.read_bytes())
+    return folder
+
+
 def _text(path, text):
     path.write_text(text)
     return path
@@ -775,10 +783,7 @@ def test_two_batches_into_one_folder_the_second_is_refused(tmp_path, elsewhere):
     import os
     import time
 
-    folder = tmp_path / "in"
-    folder.mkdir()
-    for index in range(40):
-        (folder / f"clip{index}.bvh").write_bytes(CLIP.read_bytes())
+    folder = _copies(tmp_path / "in", 40)
     out = tmp_path / "out"
     first = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", str(folder), str(out),
                               "-j", "1", "-q"], stderr=subprocess.PIPE, text=True)
@@ -961,10 +966,7 @@ def test_a_batchs_json_reader_that_goes_away_stops_it_saying_what_is_not_done(tm
     """``batch --json | head``: the reader closes standard output; the batch stops as Ctrl-C stops it and
     says so on standard error, with what --resume would finish (it stopped at once, exit 1, saying
     nothing: ten of twelve clips left without a word)."""
-    folder = tmp_path / "in"
-    folder.mkdir()
-    for index in range(12):
-        (folder / f"clip{index:02}.bvh").write_bytes(CLIP.read_bytes())
+    folder = _copies(tmp_path / "in", 12)
     out = tmp_path / "out"
     batch = subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", str(folder), str(out),
                               "-j", "1", "--json", *FAST], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
