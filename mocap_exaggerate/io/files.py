@@ -10,14 +10,11 @@ import os
 import secrets
 import stat
 import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 from ..core.errors import InputError, MocapError
 
 __all__ = ["OutputExistsError", "OutputSet", "atomic_write", "write_files", "same_file", "remove_stale_temporaries",
-           "folder_held", "FOLDER_WAIT",
            "digest_of", "digest_of_file", "read_limited", "read_stream", "regular_file", "write_all", "not_a_folder",
            "LIMITS"]
 
@@ -287,47 +284,6 @@ class OutputSet:
 
     def __exit__(self, *exc) -> None:
         self.abort()
-
-
-#: How long a run waits for another writing into its output folder before it gives up (seconds).
-FOLDER_WAIT = 60.0
-
-
-@contextmanager
-def folder_held(folder: str | os.PathLike, *, label: str = "", wait: float = FOLDER_WAIT) -> Iterator[None]:
-    """Hold ``folder`` (made if needed) while an output set is written into it: a second run into it
-    waits for the first to finish its set (up to ``wait`` seconds), so that neither takes the other's
-    live temporary files for a killed run's and deletes them, and each set lands whole. A batch holds
-    its folder for all its clips (`mocap_exaggerate.jobs.batch.batch_lock`): a run into it waits, then
-    is refused in one line. The lock is the folder's own (``flock``), released when the set is written
-    or the process ends; where the file system has no locks on folders, nothing is held."""
-    import fcntl
-    import time
-
-    path = Path(folder)
-    path.mkdir(parents=True, exist_ok=True)
-    try:
-        handle = os.open(path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
-    except OSError:
-        yield
-        return
-    try:
-        deadline = time.monotonic() + wait
-        while True:
-            try:
-                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() >= deadline:
-                    raise MocapError(f"{path}: another run (or a batch) is writing into this folder; "
-                                     f"{label + ' was ' if label else ''}not written: run again when it has "
-                                     "finished, or choose another folder") from None
-                time.sleep(0.05)
-            except OSError:  # (no locks on folders here)
-                break
-        yield
-    finally:
-        os.close(handle)  # (closing releases the lock)
 
 
 def remove_stale_temporaries(path: str | os.PathLike, *, keep: list[Path] = ()) -> list[Path]:

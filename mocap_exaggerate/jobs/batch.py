@@ -160,8 +160,8 @@ class _FolderLock:
 
 
 def _busy(out_dir) -> ConfigError:
-    return ConfigError(f"{out_dir}: another batch (or run) is writing into this folder; wait for it to end, or "
-                       "choose another output folder")
+    return ConfigError(f"{out_dir}: another batch is writing into this folder; wait for it to end, or choose "
+                       "another output folder")
 
 
 @contextmanager

@@ -19,7 +19,6 @@ Example::
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import re
@@ -42,7 +41,6 @@ from ..io.files import (
     OutputSet,
     digest_of,
     digest_of_file,
-    folder_held,
     not_a_folder,
     remove_stale_temporaries,
     same_file,
@@ -226,7 +224,6 @@ def convert(
     path_file: str | os.PathLike | None = None,
     protect: tuple[str | os.PathLike, ...] = (),
     parameters: str | None = None,
-    hold_folder: bool = True,
 ) -> JobRecord:
     """Exaggerate one clip and write its output set.
 
@@ -256,9 +253,6 @@ def convert(
     path_file : a trails file with edited paths for the limbs to follow
     protect : more files that must never be written over (the pipeline file the config came from)
     parameters : `parameters_digest` of these settings, when the caller has it already (a batch)
-    hold_folder : hold the output folder while the set is written (`mocap_exaggerate.io.files.folder_held`):
-        two runs into one folder write one after the other, each its whole set. A batch holds it for
-        all its clips and passes False.
 
     Returns
     -------
@@ -371,13 +365,11 @@ def convert(
     result = run(motion, config, paths=paths)
     warnings += result.warnings
     timings.update(result.timings)
+    for target in targets.values():
+        remove_stale_temporaries(target, keep=inputs)  # what a killed earlier run of these outputs left
     info = None
     outputs: dict[str, Any] = {}
-    # Another run writing into the folder is waited for (its temporaries are live, not a killed run's).
-    held = folder_held(output, label=label) if hold_folder and not to_stream else contextlib.nullcontext()
-    with held, ThreadPoolExecutor(max_workers=1) as pool, OutputSet(overwrite=True) as written:
-        for target in targets.values():
-            remove_stale_temporaries(target, keep=inputs)  # what a killed earlier run of these outputs left
+    with ThreadPoolExecutor(max_workers=1) as pool, OutputSet(overwrite=True) as written:
         # The GLB is built while the BVH is formatted and written: both spend most of
         # their time in NumPy, which lets go of the GIL, so two cores share the work.
         if glb:

@@ -44,8 +44,7 @@ def convert_file(clip: Clip, out_dir: str | os.PathLike, options: BatchOptions,
                 return kept_result(label, clip, out_dir, started, kept)
         record = convert(clip.source, Path(out_dir) / clip.relative.parent, options.config, preset=options.preset,
                          name=clip.name, label=label, overwrite=options.overwrite or options.resume,
-                         parameters=parameters, protect=options.protect,
-                         hold_folder=False)  # (the batch holds the folder for all its clips)
+                         parameters=parameters, protect=options.protect)
     except OutputExistsError as error:
         return failed(f"{error}; --overwrite replaces it (batch --resume keeps finished clips, redoes the rest)")
     except MocapError as error:
