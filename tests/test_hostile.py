@@ -977,3 +977,21 @@ def test_a_batchs_json_reader_that_goes_away_stops_it_saying_what_is_not_done(tm
     assert "standard output closed" in said and "not done" in said and "--resume" in said, said
     done = run("batch", folder, out, "-j", "1", "--resume", "-q", *FAST)
     assert done.returncode == 0 and len(list(out.glob("*.bvh"))) == 12, done.stderr
+
+
+def test_two_runs_into_one_folder_at_once_both_write_their_set(tmp_path):
+    """A farm's retry beside its first try, same clip, same folder: both runs finish (one failed with
+    "clip.bvh: No such file or directory", the other having taken its live temporaries for a killed
+    run's and deleted them), and the set in the folder is whole."""
+    from mocap_exaggerate.jobs.job import check_output_set
+
+    out = tmp_path / "out"
+    assert run("exaggerate", CLIP, "-o", out, "-q", *FAST).returncode == 0
+    for _ in range(3):
+        runs = [subprocess.Popen([sys.executable, "-m", "mocap_exaggerate_cli.main", "exaggerate", str(CLIP), "-o",
+                                  str(out), "--overwrite", "--omega", omega, "-q", *FAST], stderr=subprocess.PIPE,
+                                 text=True) for omega in ("2", "3")]
+        said = [process.communicate(timeout=120)[1] for process in runs]
+        assert [process.returncode for process in runs] == [0, 0], said
+        assert check_output_set(out / f"{CLIP.stem}.json") == []
+    assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]

@@ -420,3 +420,25 @@ def test_a_character_given_with_no_glb_is_said_to_be_unused(tmp_path):
     record = convert(SAMPLE_DIR / "cmu_09_01_run_daz.bvh", tmp_path, glb=False, skin=default_skin(motion.skeleton))
     assert any("not used" in w and "--no-glb" in w for w in record.warnings), record.warnings
     assert not any("not used" in w for w in convert(SAMPLE_DIR / "cmu_09_01_run_daz.bvh", tmp_path / "b", glb=False).warnings)
+
+
+def test_a_temporary_another_run_is_writing_is_not_cleared_away(tmp_path):
+    """Two runs into one folder (a farm's retry beside its first try): each clears what a killed run
+    left, but not the other's temporaries while it writes them (it holds a lock on each until its set
+    is in place). Before, one run deleted the other's live files, which failed: "No such file"."""
+    from mocap_exaggerate.io.files import remove_stale_temporaries
+
+    target = tmp_path / "clip.bvh"
+    left = tmp_path / ".clip.bvh.killed01.tmp"  # what a killed run left: nobody holds it
+    left.write_bytes(b"half a clip")
+    writing = OutputSet()
+    writing.add(target, b"the other run's clip")
+    (live, _), = writing.pending
+    assert remove_stale_temporaries(target) == [left]
+    assert Path(live).exists() and not left.exists()
+    writing.commit()
+    assert target.read_bytes() == b"the other run's clip" and not writing.live
+    aborted = OutputSet(overwrite=True)
+    aborted.add(target, b"another")
+    aborted.abort()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.bvh"] and not aborted.live

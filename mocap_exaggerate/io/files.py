@@ -168,6 +168,7 @@ class OutputSet:
         self.overwrite = overwrite
         self.pending: list[tuple[str, Path]] = []
         self.created: list[Path] = []  # folders made for the set, removed again by abort
+        self.live: list[int] = []  # locks on the temporary files, held until the set is in place (`_live`)
 
     def add(self, path: str | os.PathLike, data) -> str:
         """Write ``data`` to a temporary file for ``path``; its ``sha256:<hex>`` digest."""
@@ -184,6 +185,7 @@ class OutputSet:
         except OSError as error:
             raise OSError(error.errno, error.strerror or str(error), str(path)) from None
         self.pending.append((tmp, path))
+        self.live.append(_hold(fd))
         try:
             with os.fdopen(fd, "wb") as handle:
                 for piece in [data] if isinstance(data, (bytes, bytearray, memoryview)) else data:
@@ -266,6 +268,13 @@ class OutputSet:
                 _remove(backup)
             except OSError:  # (the next run clears it: a temporary's name)
                 pass
+        self._let_go()
+
+    def _let_go(self) -> None:
+        """Release the temporary files' locks (each now a target, or removed)."""
+        for live in self.live:
+            os.close(live)  # (closing releases the lock)
+        self.live.clear()
 
     def abort(self) -> None:
         """Remove the temporary files not yet renamed."""
@@ -278,6 +287,7 @@ class OutputSet:
                 break
         self.pending.clear()
         self.created.clear()
+        self._let_go()
 
     def __enter__(self) -> OutputSet:
         return self
@@ -286,18 +296,55 @@ class OutputSet:
         self.abort()
 
 
+def _hold(fd: int) -> int:
+    """A second descriptor of a new temporary file, holding a lock on it until it is closed: the file is
+    being written (`_live`). Where the system has no such locks, a descriptor that holds nothing."""
+    live = os.dup(fd)
+    try:
+        import fcntl
+
+        fcntl.flock(live, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except (ImportError, OSError):
+        pass
+    return live
+
+
+def _live(path: Path) -> bool:
+    """Whether another run is writing the temporary file at ``path`` now (it holds its lock, `_hold`)."""
+    try:
+        import fcntl
+    except ImportError:
+        return False
+    try:
+        probe = os.open(path, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(probe, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:
+        return False
+    finally:
+        os.close(probe)
+    return False
+
+
 def remove_stale_temporaries(path: str | os.PathLike, *, keep: list[Path] = ()) -> list[Path]:
     """Delete temporary files that an interrupted write of ``path`` left beside it; the ones removed.
 
     Only names this module makes (``.<name>.<random>.tmp`` in the same
-    folder) are touched: nothing else in the folder is.
+    folder) are touched: nothing else in the folder is, nor a temporary file another run is writing
+    now (it holds a lock on it until its set is in place: two runs into one folder, a farm's retry
+    beside its first try, once took each other's live files for a killed run's and deleted them).
     """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     removed = []
     if folder.is_dir():
         for stale in folder.glob(f".{glob.escape(path.name)}.*.tmp"):
-            if stale.is_file() and not stale.is_symlink() and not any(same_file(stale, k) for k in keep):
+            if (stale.is_file() and not stale.is_symlink() and not any(same_file(stale, k) for k in keep)
+                    and not _live(stale)):
                 _remove(str(stale))
                 removed.append(stale)
     return removed
