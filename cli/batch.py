@@ -50,12 +50,10 @@ def run_reported(clips, out_dir: Path, options, *, jobs: int, as_json: bool, pro
 
     from mocap_exaggerate.jobs.batch import BatchInterrupted, run_batch
 
-    from .report import Progress, summary
+    from .report import OutputClosed, Progress, summary
 
     is_quiet = quiet()
     progress = Progress(len(clips) + len(problems), quiet=is_quiet, as_json=as_json)
-    for problem in problems:
-        progress(problem)
     started = time.perf_counter()
     if scheduler is None:
         workers: int | str = min(jobs, max(len(clips), 1))
@@ -63,13 +61,17 @@ def run_reported(clips, out_dir: Path, options, *, jobs: int, as_json: bool, pro
         workers = f"a local Dask cluster of {jobs} worker(s)" if scheduler == "local" else f"Dask at {scheduler}"
     pending, reason = [], None
     try:
+        for problem in problems:
+            progress(problem)
         results = run_batch(clips, out_dir, options, jobs=jobs, on_result=progress, scheduler=scheduler)
+    except OutputClosed:  # (while the files met on the way were said: no clip has begun)
+        results, pending = [], list(clips)
     except BatchInterrupted as stop:
         results, pending, reason = stop.results, stop.pending, stop.reason
-        if progress.closed:
-            reason = "standard output closed (the reader of --json went away)"
     finally:
         progress.close()
+    if progress.closed:
+        reason = "standard output closed (the reader of --json went away)"
     if reason:
         log.error("%s; %d file(s) not done (--resume finishes them)", reason, len(pending))
     results = list(problems) + results

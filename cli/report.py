@@ -74,7 +74,9 @@ class Progress:
                 click.echo(result.to_json())  # stdout: one line per file, for farm tooling
             except BrokenPipeError:
                 self.closed = True
-                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # (nothing more to say there)
+                nothing = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(nothing, sys.stdout.fileno())  # (nothing more to say there)
+                os.close(nothing)
         try:
             self._say(result)
         finally:

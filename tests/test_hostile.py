@@ -995,3 +995,22 @@ def test_two_runs_into_one_folder_at_once_both_write_their_set(tmp_path):
         assert [process.returncode for process in runs] == [0, 0], said
         assert check_output_set(out / f"{CLIP.stem}.json") == []
     assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_a_json_reader_gone_before_the_first_clip_is_said_too(tmp_path):
+    """The reader is gone before any clip runs, and the first result said is a clip refused by its name:
+    the same stop and the same words (it was "Aborted!", exit 130, as if Ctrl-C)."""
+    import os
+
+    folder = _copies(tmp_path / "in", 2)
+    (folder / "clip00.bvh").rename(folder / "bad\x01name.bvh")
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "batch", str(folder),
+                               str(tmp_path / "out"), "-j", "1", "--json", *FAST], stdout=write, stderr=subprocess.PIPE,
+                              text=True, timeout=120)
+    finally:
+        os.close(write)
+    assert done.returncode == 1 and "Traceback" not in done.stderr and "Aborted" not in done.stderr, done.stderr
+    assert "standard output closed" in done.stderr and "1 file(s) not done" in done.stderr, done.stderr

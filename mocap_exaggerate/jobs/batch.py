@@ -88,26 +88,25 @@ def _run_batch(clips, out_dir, options, jobs, on_result, scheduler, lock=None) -
     def waiting() -> list[Clip]:
         return [clip for clip in clips if clip not in done]
 
-    for clip in clips:  # a name no output can have fails that clip alone
-        try:
-            check_name(clip.name)
-        except ConfigError as error:
-            finished(clip, FileResult(str(clip.source), "failed", error=f"{clip.source}: {error}"))
-    for clip, other in clashes(waiting(), out_dir).items():  # never write over a clip of the batch
-        finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would replace the input {other}; "
-                                                                    "choose an output folder apart from the clips"))
-    for clip, other in foreign_clips(waiting(), out_dir).items():  # nor a clip outside the batch
-        finished(clip, FileResult(str(clip.source), "failed", error=f"its BVH would replace {other}, a clip this tool "
-                                  "did not write (no manifest or pipeline file of ours beside it); move it, or "
-                                  "choose another output folder"))
-    for clip, other in same_outputs(waiting()).items():  # nor one clip's over another's
-        finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would be those of {other.source}"))
-
     def in_order() -> list[FileResult]:
         return [done[clip] for clip in sorted(done, key=order.__getitem__)]
 
-    todo = waiting()
-    try:
+    try:  # (from the first result said: a reader of them that goes away stops the batch as Ctrl-C does)
+        for clip in clips:  # a name no output can have fails that clip alone
+            try:
+                check_name(clip.name)
+            except ConfigError as error:
+                finished(clip, FileResult(str(clip.source), "failed", error=f"{clip.source}: {error}"))
+        for clip, other in clashes(waiting(), out_dir).items():  # never write over a clip of the batch
+            finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would replace the input {other}; "
+                                                                        "choose an output folder apart from the clips"))
+        for clip, other in foreign_clips(waiting(), out_dir).items():  # nor a clip outside the batch
+            finished(clip, FileResult(str(clip.source), "failed", error=f"its BVH would replace {other}, a clip this "
+                                      "tool did not write (no manifest or pipeline file of ours beside it); move it, "
+                                      "or choose another output folder"))
+        for clip, other in same_outputs(waiting()).items():  # nor one clip's over another's
+            finished(clip, FileResult(str(clip.source), "failed", error=f"its outputs would be those of {other.source}"))
+        todo = waiting()
         if scheduler is not None:
             run_on_dask(todo, out_dir, options, parameters, scheduler=scheduler, jobs=jobs, finished=finished)
         elif jobs <= 1 or len(todo) <= 1:
