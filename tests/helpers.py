@@ -98,6 +98,10 @@ MALFORMED = {
                                           "'\u0661' is not a whole"),
     "frame time with an underscore": (make_bvh(SIMPLE, "Frames: 1\nFrame Time: 0.008_333\n1 2 3 4 5 6 7 8 9\n"), 18,
                                       "'0.008_333' is not a number"),
+    "a channel count with an underscore": (make_bvh(SIMPLE.replace("CHANNELS 3", "CHANNELS 0_3")), 9,
+                                           "'0_3' is not a whole"),
+    "a channel count of 5,000 digits": (make_bvh(SIMPLE.replace("CHANNELS 3", "CHANNELS " + "9" * 5000)), 9,
+                                        "not between 0 and 6"),
     "an offset in another script's digits": (make_bvh(SIMPLE.replace("OFFSET 0 1 0\n    CHANNELS",
                                                                      "OFFSET 0 \u0661 0\n    CHANNELS")), 8, "OFFSET"),
 }

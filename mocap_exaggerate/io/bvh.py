@@ -465,12 +465,12 @@ def _parse_header(text: str, label: str) -> Skeleton:
             if channels[joint]:
                 raise tokens.error(f"joint {names[joint]!r} has a second CHANNELS line", line)
             count_token, _ = tokens.next("channel count")
-            try:
-                count = int(count_token)
-            except ValueError:
-                raise tokens.error(f"CHANNELS count {count_token!r} is not a whole number", line) from None
+            if not _WHOLE_RE.match(count_token):  # (plain digits: int() also takes 0_3 and other scripts' digits)
+                raise tokens.error(f"CHANNELS count {count_token[:40]!r} is not a whole number", line)
+            count = int(count_token) if len(count_token) <= 18 else 7  # (past 6 either way; int() stops at 4300 digits)
             if not 0 <= count <= 6:
-                raise tokens.error(f"CHANNELS count {count} is not between 0 and 6", line)
+                shown = count_token if len(count_token) <= 20 else f"{count_token[:20]}... ({len(count_token)} digits)"
+                raise tokens.error(f"CHANNELS count {shown} is not between 0 and 6", line)
             listed = []
             for _ in range(count):
                 name_token, name_line = tokens.next("channel name")

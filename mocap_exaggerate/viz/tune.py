@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
-from ..core.errors import ConfigError, MocapError
+from ..core.errors import ConfigError, MocapError, printable
 
 __all__ = ["TUNED", "Slider", "Tuner", "serve", "bind_port", "TuneServer", "slider_values"]
 
@@ -233,7 +233,7 @@ class TuneServer(ThreadingHTTPServer):
         error = sys.exc_info()[1]
         if isinstance(error, ConnectionError):
             return
-        print(f"tune: a request failed: {type(error).__name__}: {str(error)[:200]}", file=sys.stderr)
+        print(printable(f"tune: a request failed: {type(error).__name__}: {str(error)[:200]}"), file=sys.stderr)
 
     def hosts(self) -> set[str]:
         """The Host headers a request of this machine's browser carries (another is a page elsewhere
