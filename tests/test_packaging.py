@@ -39,7 +39,7 @@ def test_the_wheel_holds_every_module_preset_and_web_file(tmp_path):
     # the install must go on without them.
     env = dict(os.environ, CC="/bin/false")
     built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-v", "-w", str(tmp_path / "wheel"),
-                            str(source)], capture_output=True, text=True, env=env)
+                            str(source)], capture_output=True, text=True, env=env, timeout=600)
     if built.returncode != 0 and "satisfies the requirement setuptools" in built.stdout + built.stderr:
         pytest.skip("pip cannot fetch setuptools to build the wheel (no network, no PIP_FIND_LINKS)")
     assert built.returncode == 0, built.stdout[-2000:] + built.stderr[-2000:]
