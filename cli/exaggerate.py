@@ -54,7 +54,7 @@ def exaggerate(input_paths: tuple[Path, ...], output: Path, name: str | None, ov
       cat walk.bvh | mocap-exaggerate exaggerate - -o - > walk_cartoon.bvh
     """
     known = (".bvh", ".glb", ".gltf", ".usd", ".usda", ".usdc", ".fbx")
-    if str(output) != "-" and output.suffix.lower() in known and not output.is_dir():
+    if str(output) != "-" and output.suffix.lower() in known and not output.exists():  # (a file there is refused)
         log.warning("%s: -o names a folder (made if needed), and the files go inside it; '-o -' writes the BVH to "
                     "standard output", printable(str(output)))
     if len(input_paths) > 1:
