@@ -10,6 +10,7 @@ import os
 import secrets
 import stat
 import tempfile
+import time
 from pathlib import Path
 
 from ..core.errors import InputError, MocapError
@@ -181,11 +182,19 @@ class OutputSet:
             missing = [f for f in (folder, *folder.parents) if not f.exists()]
             folder.mkdir(parents=True, exist_ok=True)
             self.created.extend(reversed(missing))
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+            # Locked before it has a temporary's name (`_live`): another run clearing leftovers never sees
+            # it unheld, even in the moment between making it and locking it.
+            fd, new = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".new", dir=folder)
+            self.live.append(_hold(fd))
+            tmp = new[: -len(".new")] + ".tmp"
+            try:
+                os.rename(new, tmp)
+            except OSError:
+                _remove(new)
+                raise
         except OSError as error:
             raise OSError(error.errno, error.strerror or str(error), str(path)) from None
         self.pending.append((tmp, path))
-        self.live.append(_hold(fd))
         try:
             with os.fdopen(fd, "wb") as handle:
                 for piece in [data] if isinstance(data, (bytes, bytearray, memoryview)) else data:
@@ -342,9 +351,12 @@ def remove_stale_temporaries(path: str | os.PathLike, *, keep: list[Path] = ()) 
     folder = path.parent if str(path.parent) else Path(".")
     removed = []
     if folder.is_dir():
-        for stale in folder.glob(f".{glob.escape(path.name)}.*.tmp"):
+        # (".new": a file killed in the moment before it got its temporary's name; a live one is that
+        # young, so only an old one is cleared)
+        old = time.time() - 600.0
+        for stale in [*folder.glob(f".{glob.escape(path.name)}.*.tmp"), *folder.glob(f".{glob.escape(path.name)}.*.new")]:
             if (stale.is_file() and not stale.is_symlink() and not any(same_file(stale, k) for k in keep)
-                    and not _live(stale)):
+                    and (stale.suffix == ".tmp" or stale.stat().st_mtime < old) and not _live(stale)):
                 _remove(str(stale))
                 removed.append(stale)
     return removed
