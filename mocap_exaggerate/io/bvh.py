@@ -186,7 +186,7 @@ def read_bvh(
             if declared_frames < 0:
                 raise InputError(f"frame count {declared_frames} is negative", source=label, line=line_no)
             if declared_frames > MAX_FRAMES:
-                shown = count if len(count) <= 20 else f"{count[:20]}... ({len(count)} digits)"
+                shown = _short_number(count)
                 raise InputError(f"'Frames: {shown}': at most {MAX_FRAMES:,} frames are read (cut the take into "
                                  f"shorter clips)", source=label, line=line_no)
             frames_line = line_no
@@ -326,6 +326,11 @@ def _decode(data: bytes, label: str) -> str:
     except UnicodeDecodeError:
         text = data.decode("latin-1")
     return text.lstrip("\ufeff")
+
+
+def _short_number(text: str) -> str:
+    """A whole number as an error quotes it: its first 20 digits and how many there are, past 20."""
+    return text if len(text) <= 20 else f"{text[:20]}... ({len(text)} digits)"
 
 
 def _line_end(data: bytes, pos: int) -> int:
@@ -469,7 +474,7 @@ def _parse_header(text: str, label: str) -> Skeleton:
                 raise tokens.error(f"CHANNELS count {count_token[:40]!r} is not a whole number", line)
             count = int(count_token) if len(count_token) <= 18 else 7  # (past 6 either way; int() stops at 4300 digits)
             if not 0 <= count <= 6:
-                shown = count_token if len(count_token) <= 20 else f"{count_token[:20]}... ({len(count_token)} digits)"
+                shown = _short_number(count_token)
                 raise tokens.error(f"CHANNELS count {shown} is not between 0 and 6", line)
             listed = []
             for _ in range(count):
