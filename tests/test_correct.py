@@ -6,10 +6,10 @@ from hypothesis import strategies as st
 from mocap_exaggerate.core.timing import spread_max
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.stages.bends import keep_bends
-from mocap_exaggerate.stages.correct import CorrectConfig, accent_stretch, correct, stretch_error
+from mocap_exaggerate.stages.correct import CorrectConfig, accent_stretch, correct, floor_squash, stretch_error
 from mocap_exaggerate.stages.extrapolate import extrapolate
 
-from .helpers import shared
+from .helpers import SAMPLE_DIR, shared
 
 
 def stretched_clip(path, omega=6.0):
@@ -117,7 +117,8 @@ def test_on_the_longest_real_clip():
 
 
 @pytest.mark.parametrize(
-    "field, value", [("threshold", -0.1), ("delta", 0.0), ("delta", 1.5), ("max_stretch", 0.5), ("max_iter", 0)]
+    "field, value", [("threshold", -0.1), ("delta", 0.0), ("delta", 1.5), ("max_stretch", 0.5), ("max_iter", 0),
+                     ("min_length", -0.1), ("min_length", 1.5), ("min_length", float("nan")), ("min_length", "half")]
 )
 def test_config_validates_naming_the_field(field, value):
     with pytest.raises(ValueError, match=f"correct.{field}"):
@@ -214,3 +215,73 @@ def test_a_knee_pushed_behind_the_leg_comes_back_and_a_bent_one_is_left_alone():
     assert out[0, 1, 2] > 0.0  # in front of the line again
     assert np.array_equal(out[1], exaggerated[1]) and np.array_equal(out[2], exaggerated[2])
     assert np.array_equal(out[:, [0, 2, 3]], exaggerated[:, [0, 2, 3]])  # only the knee moves
+
+
+# ---------------------------------------------------------------------------- the squash floor
+
+
+def _squashed_chain(lengths: np.ndarray) -> np.ndarray:
+    """(F, 3, 3): a root, a unit link along X squashed to ``lengths`` (F,), and a unit link up from its end."""
+    pos = np.zeros((len(lengths), 3, 3))
+    pos[:, 1, 0] = lengths
+    pos[:, 2, 0] = lengths
+    pos[:, 2, 1] = 1.0
+    return pos
+
+
+PARENTS = np.array([-1, 0, 1])
+REST = np.array([0.0, 1.0, 1.0])
+
+
+def test_the_squash_floor_by_hand_and_only_past_its_knee():
+    # Floor 0.5: the room is half the length, its knee two fifths of that (0.2). A link squashed to 0.1
+    # (0.9 short) is 0.2 + 0.3 tanh(0.7 / 0.3) short after it: 0.50560 long.
+    lengths = np.array([1.0, 0.95, 0.8, 0.1, 0.0001])
+    out, moved = floor_squash(_squashed_chain(lengths), PARENTS, REST, 0.5)
+    assert moved == 2
+    assert out[3, 1, 0] == pytest.approx(1.0 - (0.2 + 0.3 * np.tanh(0.7 / 0.3)), abs=1e-12)
+    assert out[3, 1, 0] == pytest.approx(0.50559, abs=1e-5)
+    # Down to the knee (0.8 long) nothing moves, to the bit; the child carries its subtree along.
+    assert np.array_equal(out[:3], _squashed_chain(lengths)[:3])
+    assert np.allclose(out[:, 2] - out[:, 1], [0.0, 1.0, 0.0])
+    assert np.all(out[:, 1, 0] > 0.5)  # eased into the floor, never reaching it
+
+
+def test_the_squash_floor_is_smooth_in_time_and_off_at_zero():
+    # A link squashing steadily from its length to nothing and back: its floored length never falls
+    # below half, never jumps, and its speed has no corner (the tanh meets the line with its slope).
+    t = np.linspace(0.0, 1.0, 2001)
+    lengths = 1.0 - np.sin(np.pi * t) * 0.999
+    out, _ = floor_squash(_squashed_chain(lengths), PARENTS, REST, 0.5)
+    floored = out[:, 1, 0]
+    assert floored.min() > 0.5 and floored.min() < 0.51
+    speed = np.diff(floored)
+    assert np.abs(np.diff(speed)).max() < 4 * np.abs(np.diff(np.diff(lengths))).max()
+    assert np.all(np.sign(speed[:1000]) <= 0) and np.all(np.sign(speed[1001:]) >= 0)
+    same, moved = floor_squash(_squashed_chain(lengths), PARENTS, REST, 0.0)
+    assert moved == 0 and np.array_equal(same, _squashed_chain(lengths))
+
+
+def test_a_looney_jump_keeps_its_upper_arm_at_half_its_length_or_more():
+    # The amc2bvh jump at looney: two arm joints pushed toward each other squashed the upper arm to 0.21
+    # of its length after the correction (and to 0.16 in the end), and its sub-links spun as it came back.
+    from mocap_exaggerate import load_bvh
+    from mocap_exaggerate.config import resolve_config
+    from mocap_exaggerate.pipeline import pipeline_limbs, prepare
+    from mocap_exaggerate.stages.correct import correct_stage
+    from mocap_exaggerate.stages.extrapolate import extrapolate_stage
+
+    motion = load_bvh(SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh", fps=120.0)
+    skeleton = motion.skeleton
+    rest = skeleton.link_lengths()
+    links = np.flatnonzero(rest > 1e-3 * rest.max())
+
+    def shortest(min_length: float) -> float:
+        config = resolve_config("looney", None, {"correct": {"min_length": min_length}})
+        state = prepare(motion, config.input, limbs=pipeline_limbs(skeleton, config))
+        state = correct_stage(extrapolate_stage(state, config.extrapolate), config.correct)
+        pos = state.positions[state.first:]
+        return float((np.linalg.norm(pos[:, links] - pos[:, skeleton.parents[links]], axis=-1) / rest[links]).min())
+
+    assert shortest(0.0) < 0.3  # the paper's correction only shortens
+    assert 0.5 < shortest(0.5) < 0.55  # the preset's floor (0.5 is the default)

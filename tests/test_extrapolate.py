@@ -169,9 +169,11 @@ def test_a_fast_moment_calms_only_itself_not_the_rest_of_the_clip():
     """The speed limit should be local: a flick at one moment should leave other joints, and frames far
     from it, as they were. Its margin of 0.98 is taken on every frame of every pass, over or not, so
     one fast frame calms every joint of the whole clip by 2 % a pass. Taking it only where a step is
-    over keeps 4 % more of calm frames' exaggeration on the shared clips, which tips the looney amc2bvh
-    jump past the quality bar for twist flips (57.9 -> 60.6 degrees in a frame, where its upper arm is
-    squashed to 15 % of its length): links need a floor on their squash first (docs/status.md)."""
+    over keeps 4 % more of calm frames' exaggeration on the shared clips. Without a floor on a link's
+    squash that tipped the looney amc2bvh jump past the quality bar for twist flips (57.9 -> 60.6
+    degrees in a frame, its upper arm squashed to 15 % of its length); with the floor (correct.min_length,
+    springs.min_length) it takes the cartoon sit-down's jerk ratio from 1.95 to 1.99, at the bar of 2.0
+    (docs/status.md)."""
     # Slow swings (a 600-frame period against sigma 12): exaggerated about 1.03x, well within the limit.
     t = np.arange(1200.0)[:, None, None]
     world = 40.0 * np.sin(2 * np.pi * t / 600.0 + np.arange(3.0)[None, :, None]) * np.array([1.0, 0.5, 0.2])

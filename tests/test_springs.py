@@ -175,7 +175,7 @@ def test_stable_for_every_value_the_cli_accepts(stiffness, link_stiffness, dampi
 
 
 @pytest.mark.parametrize("field, value", [("stiffness", -1.0), ("link_stiffness", 2e5), ("damping", -0.1),
-                                          ("blend", 1.5), ("max_stretch", 0.9)])
+                                          ("blend", 1.5), ("max_stretch", 0.9), ("min_length", -0.5), ("min_length", 2.0)])
 def test_config_validates_naming_the_field(field, value):
     with pytest.raises(ConfigError, match=f"springs.{field}"):
         SpringConfig(**{field: value})
@@ -223,6 +223,29 @@ def test_the_lag_stretches_a_link_softly_to_its_most_and_the_chain_below_follows
     assert np.allclose(limit_stretch(after, longer, CHAIN, rest, np.array([1, 2, 3, 4]), 2.0), after)
     # Links not swung are left alone.
     assert np.array_equal(limit_stretch(after, before, CHAIN, rest, np.array([1, 3]), 2.0), after)
+
+
+def test_the_lag_squashes_a_link_softly_to_its_floor_and_the_chain_below_follows():
+    # The same chain; the springs squashed link 2 to 0.9x (frame 0), 0.2x (frame 1) and 0.6x (frame 2,
+    # where it was already 0.6x before them).
+    rest_pose = np.stack([np.zeros(5), np.arange(5.0), np.zeros(5)], 1)
+    before = np.stack([rest_pose] * 3)
+    before[2, 2:, 1] -= 0.4
+    after = np.stack([rest_pose] * 3)
+    after[0, 2:, 1] -= 0.1
+    after[1, 2:, 1] -= 0.8
+    after[2, 2:, 1] -= 0.4
+    rest = np.concatenate([[0.0], np.ones(4)])
+    links = np.array([1, 2, 3, 4])
+    out = limit_stretch(after, before, CHAIN, rest, links, 2.0, least=0.5)
+    # Down to the knee (0.75x: half way from the rest length to the floor) nothing moves, to the bit, nor
+    # a link the springs left no shorter than before them.
+    assert np.array_equal(out[[0, 2]], after[[0, 2]])
+    # Below it, a tanh into the floor, 0.5x (0.75 - 0.25 tanh(0.55 / 0.25) = 0.5062), along the link.
+    assert np.linalg.norm(out[1, 2] - out[1, 1]) == pytest.approx(0.75 - 0.25 * np.tanh(0.55 / 0.25))
+    assert np.allclose(np.diff(out[1, 2:], axis=0), np.diff(after[1, 2:], axis=0))
+    # Without a floor (0, the paper's), the squash stays.
+    assert np.array_equal(limit_stretch(after, before, CHAIN, rest, links, 2.0), after)
 
 
 def test_no_link_of_a_looney_dance_stretches_past_the_presets_range():

@@ -32,6 +32,17 @@ smooth in time, keeping the guarantees:
 3. applied to a soft excess: ``max(0, d - m l)`` with its corner rounded
    over 5 % of the link's length (never less than the hard excess), so a
    link reaching its free stretch slows down instead of stopping dead.
+
+The paper's correction only shortens. Exaggeration also squashes: two ends
+pushed toward each other can bring an upper arm to a fifth of its length (the
+looney amc2bvh jump), and its sub-links then spin as it comes back. Drawn
+characters "do not squash unless they are under the influence of another
+object" (Ibrahim 2018, section 4.2), so `floor_squash` gives links a soft
+floor, ``min_length`` of their length (0.5 by default): a link squashed less
+than two fifths of the way there keeps its length, one squashed more eases into
+the floor, never reaching it, along its own direction (the pose's bends are
+kept). Squash asked for on purpose (a stretch event) comes later and is not
+bounded.
 """
 
 from __future__ import annotations
@@ -46,14 +57,14 @@ from ..core.errors import ConfigError, check_flag, check_number
 from ..core.kinematics import cache_blocks
 from ..core.rotations import vector_norm
 from ..core.settings import Flag, setting
-from ..core.timing import check_duration, parse_duration, smootherstep, spread_max
+from ..core.timing import check_duration, parse_duration, smootherstep, soft_limit, spread_max
 from .bends import keep_bends
 
 if TYPE_CHECKING:
     from .state import State
 
 __all__ = ["CorrectConfig", "CorrectReport", "accent_stretch", "correct", "correct_stage", "max_link_stretch",
-           "stretch_error"]
+           "floor_squash", "stretch_error"]
 
 #: The correction's spread in time is never narrower than this many frames either side: at 30 fps its 0.1 s
 #: is 3 frames, and a thigh let go over them moved the knee 2.09x its largest captured step (issue 25).
@@ -86,6 +97,11 @@ class CorrectConfig:
         spine and neck chains) get; below 1 they are also held to it in
         every frame, so the torso never stretches more than that (cartoon
         torsos stretch less than limbs). 1 treats them like any link.
+    min_length : the squash floor: no link is squashed below this share of
+        its length; links at more than ``1 - 0.4 (1 - min_length)`` of it (0.8
+        at 0.5) are left alone, shorter ones ease into the floor (see
+        `floor_squash`). 0 leaves squash unbounded, as the paper does; 1 lets
+        no link squash.
     """
 
     enabled: bool = setting(True, flag=Flag("--correct/--no-correct", "Switch link correction on or off."))
@@ -98,10 +114,12 @@ class CorrectConfig:
     smooth: str | float = "0.1s"
     accent_speed: float = 0.0
     torso: float = 1.0
+    min_length: float = 0.5
 
     def __post_init__(self) -> None:
         check_flag("correct.enabled", self.enabled)
         check_number("correct.torso", self.torso, 0, 1)
+        check_number("correct.min_length", self.min_length, 0, 1)
         check_number("correct.accent_speed", self.accent_speed, 0, 100)
         check_duration(self.smooth, "correct.smooth")
         check_number("correct.threshold", self.threshold, 0, 10)
@@ -120,6 +138,7 @@ class CorrectReport:
     max_error_before: float
     max_error_after: float
     unconverged_frames: int
+    frames_floored: int = 0
 
 
 def accent_stretch(captured: np.ndarray, frame_time: float, height: float, *, max_stretch: float,
@@ -279,6 +298,45 @@ def _rebuild(pos: np.ndarray, parents: np.ndarray, vec: np.ndarray, length: np.n
     return pos
 
 
+#: Where the squash floor starts to act, as a share of the room between a link's length and its floor.
+_KNEE = 0.4
+
+
+def floor_squash(world_pos: np.ndarray, parents: np.ndarray, rest_lengths: np.ndarray,
+                 min_length: float) -> tuple[np.ndarray, int]:
+    """Positions (a new array) with every link squashed toward ``min_length`` of its length eased off it.
+
+    A link's shortening ``s = l - d`` is kept up to a knee of two fifths of
+    the room, ``0.4 (1 - min_length) l``, and above it eases into ``(1 - min_length) l``
+    (`soft_limit`: continuous with its first derivative, so a link squashing
+    smoothly comes back smoothly); the link keeps its direction and its
+    child carries its subtree. Placeholder links (under 1e-3 of the longest)
+    are left as they are. Returns the positions and how many frames moved;
+    frames with no link past the knee are copied unchanged.
+
+    >>> pos = np.array([[[0.0, 0, 0], [0.1, 0, 0], [0.1, 1, 0]]])  # a 1-long link squashed to 0.1
+    >>> out, moved = floor_squash(pos, np.array([-1, 0, 1]), np.array([0.0, 1.0, 1.0]), 0.5)
+    >>> np.round(out[0, :, :2], 3).tolist(), moved
+    ([[0.0, 0.0], [0.506, 0.0], [0.506, 1.0]], 1)
+    """
+    out = np.array(world_pos, dtype=np.float64)
+    links = rest_lengths[1:]
+    if min_length <= 0 or not len(links) or links.max(initial=0.0) <= 0:
+        return out, 0
+    vec = out[:, 1:] - out[:, parents[1:]]
+    length = vector_norm(vec)
+    room = (1.0 - min_length) * links
+    knee = _KNEE * room
+    counted = links > 1e-3 * links.max()
+    squashed = np.flatnonzero(((links - length > knee) & counted).any(axis=1))
+    if not len(squashed):
+        return out, 0
+    short = links - length[squashed]
+    new_len = np.where(counted, links - soft_limit(short, knee, room), length[squashed])
+    out[squashed] = _rebuild(out[squashed], parents, vec[squashed], length[squashed], new_len)
+    return out, len(squashed)
+
+
 #: Width of the rounded corner of the soft excess, as a share of the link's rest length.
 _SOFT = 0.05
 
@@ -328,6 +386,8 @@ def correct_stage(state: State, config: CorrectConfig) -> State:
         bent, skeleton.parents, skeleton.link_lengths(), threshold=config.threshold,
         delta=config.delta, max_stretch=max_stretch, max_iter=config.max_iter, smooth=smooth, hard=hard,
     )
+    body, floored = floor_squash(body, skeleton.parents, skeleton.link_lengths(), config.min_length)
+    report = replace(report, frames_floored=floored)
     positions = state.positions.copy()
     positions[first:] = body
     notes = state.notes

@@ -60,6 +60,10 @@ class SpringConfig:
     max_stretch : the lag stretches no sub-link past this factor of its rest
         length, or past its length before the springs where a stretch or the
         correction already made it longer (`limit_stretch`)
+    min_length : nor squashes one below this share of its rest length, or
+        below its length before the springs where that is shorter (0: no
+        floor; a hand lagging behind a fast elbow had squashed a looney
+        upper arm from 0.55 to 0.26 of its length)
     """
 
     enabled: bool = setting(True, flag=Flag("--springs/--no-springs", "Switch the follow-through on or off."))
@@ -73,6 +77,7 @@ class SpringConfig:
     max_stretch: float = setting(2.0, flag=Flag(
         "--spring-max-stretch", "The follow-through stretches a sub-link at most to this factor of its rest "
         "length (or its length before the springs, if longer).", metavar="FACTOR"))
+    min_length: float = 0.5
 
     def __post_init__(self) -> None:
         check_flag("springs.enabled", self.enabled)
@@ -81,6 +86,7 @@ class SpringConfig:
         check_number("springs.damping", self.damping, *DAMPING_RANGE)
         check_number("springs.blend", self.blend, 0, 1)
         check_number("springs.max_stretch", self.max_stretch, 1, 10)
+        check_number("springs.min_length", self.min_length, 0, 1)
         if self.stiffness == 0 and self.damping == 0 and self.blend > 0:
             raise ConfigError("springs: stiffness and damping are both 0, so nothing holds the body; raise one")
 
@@ -351,7 +357,7 @@ def springs_stage(state: State, config: SpringConfig) -> State:
     # A hand lagging behind a fast elbow stretched a looney forearm to 2.4x (the preset says 2x at
     # most) and tore the skin on it: the lag's stretch is held to max_stretch.
     limit_stretch(out[state.first:], positions[state.first:], parents, hierarchy.skeleton.link_lengths(), swung,
-                  config.max_stretch, in_place=True)
+                  config.max_stretch, least=config.min_length, in_place=True)
     substeps = substeps_for(frame_time, config.stiffness, config.link_stiffness, links.degree)
     carried = stable_link_stiffness(frame_time, config.link_stiffness, links.degree, substeps)
     notes = state.notes
@@ -370,9 +376,10 @@ LIMIT_ROOM = 0.2
 
 
 def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray, rest: np.ndarray,
-                  links: np.ndarray, most: float, *, in_place: bool = False) -> np.ndarray:
+                  links: np.ndarray, most: float, *, least: float = 0.0, in_place: bool = False) -> np.ndarray:
     """``positions`` (F, J, 3) with the links ending at ``links`` no longer than ``most`` times their
-    ``rest`` length, or than in ``before`` (F, J, 3) where that is longer; everything below follows.
+    ``rest`` length, or than in ``before`` (F, J, 3) where that is longer, and (with ``least``) no
+    shorter than ``least`` times it, or than in ``before`` where that is shorter; everything below follows.
 
     A link is shortened along its own direction, so its bend and turn stay as they were, and a
     shortened link carries its subtree with it (each joint is its parent plus its own, possibly
@@ -381,8 +388,11 @@ def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray
     - 1) rest``, or up to its length before, whichever is more, and eases above that (a tanh, so the
     length and its speed stay continuous) into ``most * rest``, or into ``LIMIT_ROOM (most - 1)
     rest`` past where it starts to give where that is more (a link a strike had already made 2x
-    long may swing a little past it rather than be clipped flat). ``in_place``: ``positions`` itself is
-    changed and returned (a float64 array or a view of one).
+    long may swing a little past it rather than be clipped flat). The floor mirrors it: a link keeps its
+    length down to ``rest - LIMIT_KNEE (1 - least) rest``, or down to its length before, whichever is
+    less, and eases below that into ``least * rest`` (or ``LIMIT_ROOM (1 - least) rest`` below where it
+    starts to give, where that is lower). ``in_place``: ``positions`` itself is changed and returned (a
+    float64 array or a view of one).
     """
     if not len(links):
         return positions
@@ -393,12 +403,12 @@ def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray
     rest = rest[1:][limited]
     way = (most - 1.0) * rest
     for part in frame_blocks(len(out), 4096):  # per frame: in blocks, a long clip's temporaries stay small
-        _limit_block(out[part], before[part], parents, limited, rest, way, most)
+        _limit_block(out[part], before[part], parents, limited, rest, way, most, least)
     return out
 
 
 def _limit_block(positions: np.ndarray, before: np.ndarray, parents: np.ndarray, limited: np.ndarray,
-                 rest: np.ndarray, way: np.ndarray, most: float) -> None:
+                 rest: np.ndarray, way: np.ndarray, most: float, least: float = 0.0) -> None:
     """`limit_stretch` on a block of frames, in place."""
     vectors = positions[:, 1:] - positions[:, parents[1:]]
     length = np.sqrt(np.einsum("fjc,fjc->fj", vectors, vectors))
@@ -406,6 +416,11 @@ def _limit_block(positions: np.ndarray, before: np.ndarray, parents: np.ndarray,
     knee = np.maximum(had, rest + LIMIT_KNEE * way)
     top = np.maximum(most * rest, knee + LIMIT_ROOM * way)
     new_length = soft_limit(length[:, limited], knee, top)
+    if least > 0:  # the floor: the same soft limit on how far a link is shorter than its rest length
+        room = (1.0 - least) * rest
+        low = np.minimum(had, rest - LIMIT_KNEE * room)
+        bottom = np.minimum(least * rest, low - LIMIT_ROOM * room)
+        new_length = np.where(new_length < low, low - soft_limit(low - new_length, 0.0, low - bottom), new_length)
     scale = np.ones_like(length)
     scale[:, limited] = np.divide(new_length, length[:, limited], out=np.ones_like(new_length),
                                   where=length[:, limited] > 0)
