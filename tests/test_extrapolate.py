@@ -1,10 +1,18 @@
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
+from mocap_exaggerate import load_preset
+from mocap_exaggerate.analysis.limbs import find_limbs
 from mocap_exaggerate.core.errors import ConfigError
 from mocap_exaggerate.core.timing import gaussian_average, parse_duration
 from mocap_exaggerate.io.bvh import read_bvh
-from mocap_exaggerate.stages.extrapolate import ExtrapolateConfig, extrapolate
+from mocap_exaggerate.pipeline import run
+from mocap_exaggerate.stages.contacts import find_ground
+from mocap_exaggerate.stages.extrapolate import ExtrapolateConfig, crouch_lift, extrapolate
+
+from .helpers import SAMPLE_DIR, shared
 
 
 def test_omega_one_is_the_identity(sample_clip):
@@ -306,3 +314,62 @@ def test_a_sigma_under_a_frame_is_said(sample_clip):
         config = PipelineConfig.from_dict({"extrapolate": {"sigma": sigma, "omega": omega}})
         warned = [w for w in run(motion, config).warnings if "extrapolate.sigma" in w]
         assert bool(warned) == said, (sigma, omega, warned)
+
+
+# ---------------------------------------------------------------------------- the crouch floor
+
+
+def test_the_crouch_floor_by_hand_and_only_past_its_knee():
+    # Floor 0.5 of a captured height of 1: the room is 0.5, the knee two fifths of it (a drop of 0.2).
+    captured = np.ones(6)
+    height = np.array([1.3, 1.0, 0.85, 0.8, 0.4, -0.2])
+    lift = crouch_lift(captured, height, 0.5)
+    assert np.array_equal(lift[:4], np.zeros(4))  # above, at or under the knee: not lifted
+    # A drop of 0.6 becomes 0.2 + 0.3 tanh(0.4 / 0.3): lifted by the rest.
+    assert lift[4] == pytest.approx(0.6 - (0.2 + 0.3 * np.tanh(0.4 / 0.3)), abs=1e-12)
+    assert np.all(height + lift > 0.5)  # eased into the floor, never on it, even from below the ground
+    # (0, in the stage, is no crouch floor at all; the function's floor is then the ground itself.)
+    assert np.array_equal(crouch_lift(captured, height, 0.0)[:4], np.zeros(4))
+
+
+def _hips_ratio(motion, config) -> float:
+    """The lowest, over frames, of the hips' height above the floor written over their captured height."""
+    captured = motion.world_positions()
+    ground = find_ground(motion.skeleton, captured)
+    limbs = find_limbs(motion.skeleton)
+    hips = [limbs[name].joints[0] for name in ("left_leg", "right_leg")]
+    result = run(motion, config)
+    written = result.world_positions[:, result.original_index]
+    above = [ground.heights(p[:, hips].mean(axis=1)) - ground.floor for p in (written, captured)]
+    return float((above[0] / above[1]).min())
+
+
+def test_a_crouch_asked_to_stay_high_is_lifted_smoothly():
+    # The amc2bvh jump at looney sinks its hips to 0.61 of their captured height as it crouches to take
+    # off; with the crouch floor at 0.9 they stay above 0.9 of it, and nothing pops.
+    from mocap_exaggerate.analysis.quality import motion_quality
+    from mocap_exaggerate.config import resolve_config
+
+    motion, _ = read_bvh(SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh", fps=120.0)
+    free = resolve_config("looney", None, {"extrapolate": {"crouch": 0.0}})
+    high = resolve_config("looney", None, {"extrapolate": {"crouch": 0.9}})
+    assert _hips_ratio(motion, free) < 0.65
+    assert _hips_ratio(motion, high) > 0.9
+    quality = {name: motion_quality(motion, run(motion, config)) for name, config in (("free", free), ("high", high))}
+    assert quality["high"]["jump_ratio"] <= quality["free"]["jump_ratio"] + 0.05
+    assert quality["high"]["jerk_ratio"] <= quality["free"]["jerk_ratio"] + 0.05
+
+
+def test_a_jumps_crouch_no_longer_sinks_to_the_floor():
+    # Found by an animator's review: the Daz jump-balance at cartoon took the hips from 0.32 to 0.08 of
+    # the height above the floor (0.30 of their captured height): the legs crumpled into a heap.
+    motion, _ = read_bvh(shared("wide/cmu_02_04_jump_balance_daz.bvh"))
+    config = load_preset("cartoon")
+    assert _hips_ratio(motion, replace(config, extrapolate=replace(config.extrapolate, crouch=0.0))) < 0.35
+    assert _hips_ratio(motion, config) > 0.5
+
+
+@pytest.mark.parametrize("value", [-0.1, 1.5, float("nan"), "deep", True])
+def test_the_crouch_setting_is_checked(value):
+    with pytest.raises(ValueError, match="extrapolate.crouch"):
+        ExtrapolateConfig(crouch=value)

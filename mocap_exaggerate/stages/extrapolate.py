@@ -50,7 +50,7 @@ from ..core.errors import ConfigError, check_flag, check_number
 from ..core.rotations import vector_norm
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
-from ..core.timing import end_ramp, gaussian_average, parse_duration, smootherstep, spread_max, step_gain
+from ..core.timing import end_ramp, gaussian_average, parse_duration, smootherstep, soft_limit, spread_max, step_gain
 
 if TYPE_CHECKING:
     from .state import State
@@ -99,6 +99,12 @@ class ExtrapolateConfig:
     torso : the spine, neck, head, collars and shoulders get this share of
         their own exaggeration on top of the root's (the torso is the body's
         mass and swings less than the limbs, but rides with the hips).
+    crouch : the hips sink no lower above the captured floor than this share
+        of their captured height at that frame: a crouch exaggerated deeper
+        eases into it, the whole body lifted (`crouch_lift`; the contacts then
+        plant the feet, the legs unfolding); 0 lets the body sink as the
+        exaggeration puts it (a jump's crouch went to a quarter of its height,
+        the legs crumpled under it).
     weights : ``(pattern, weight)`` pairs; a pattern is a joint name, a shell
         pattern (``Left*``) or a limb name (``left_arm``). A joint's effective
         omega is ``1 + weight * (omega - 1)``; weight 0 keeps it as captured.
@@ -113,6 +119,7 @@ class ExtrapolateConfig:
     max_speed: float = 2.0
     still: float = 0.05
     torso: float = 1.0
+    crouch: float = 0.5
     weights: tuple[tuple[str, float], ...] = setting((), flag=Flag(
         "--weight", "Per-joint exaggeration weight; NAME is a joint, a pattern (Left*) or a limb (left_arm, "
         "right_leg, spine, neck). Repeatable; 0 keeps it as captured.",
@@ -128,6 +135,7 @@ class ExtrapolateConfig:
         check_number("extrapolate.omega", self.omega, 0, 50)
         check_number("extrapolate.still", self.still, 0, 10)
         check_number("extrapolate.torso", self.torso, 0, 10)
+        check_number("extrapolate.crouch", self.crouch, 0, 1)
         if self.max_speed != 0:  # (0: no limit, said in the message too)
             try:
                 check_number("extrapolate.max_speed", self.max_speed, 1, 100)
@@ -319,6 +327,9 @@ def extrapolate_stage(state: State, config: ExtrapolateConfig) -> State:
         torso=(torso_joints(skeleton, state.limbs), config.torso) if config.torso != 1 else None,
         riders=rider_joints(skeleton), return_limited=True,
     )
+    if config.crouch > 0:
+        positions[first:] += crouch_shift(positions[first:], state.captured_pos[first:], skeleton, state.limbs,
+                                          config.crouch)[:, None]
     report = speed_limit_report(limited, skeleton, config.max_speed, frame_time, first, sigma)
     if report is not None and report.joints:
         notes += (report.note(),)
@@ -328,6 +339,42 @@ def extrapolate_stage(state: State, config: ExtrapolateConfig) -> State:
                      "is the motion itself, so next to nothing is exaggerated (the presets take 0.15-0.3s)",)
     return replace(state, positions=positions, notes=notes, warnings=warnings, speed_limit=config.max_speed,
                    speed_report=report)
+
+
+#: Where the crouch floor starts to act, as a share of the room between the captured height and the floor.
+_CROUCH_KNEE = 0.4
+
+
+def crouch_lift(captured: np.ndarray, height: np.ndarray, crouch: float) -> np.ndarray:
+    """(F,) how far to lift the body so its hips, ``height`` (F,) above the floor, sink no lower than
+    ``crouch`` times their ``captured`` (F,) height at that frame.
+
+    A drop below the captured height is kept up to a knee, two fifths of the way to that floor, and
+    eases into the floor past it (`soft_limit`, continuous with its first derivative), never reaching
+    it; frames at or above the knee are not lifted. (At ``crouch`` 0 the floor is the ground itself.)
+
+    >>> np.round(crouch_lift(np.array([1.0, 1.0, 1.0]), np.array([1.2, 0.9, 0.1]), 0.5), 3).tolist()
+    [0.0, 0.0, 0.406]
+    """
+    drop = captured - height
+    room = (1.0 - crouch) * np.maximum(captured, 0.0)
+    return np.maximum(drop - soft_limit(drop, _CROUCH_KNEE * room, room), 0.0)
+
+
+def crouch_shift(positions: np.ndarray, captured_pos: np.ndarray, skeleton: Skeleton, limbs: dict,
+                 crouch: float) -> np.ndarray:
+    """(F, 3) the body's move up so its hips (the middle of the legs' base joints in ``positions`` (F, J, 3))
+    sink no lower above the captured floor than ``crouch`` times their captured height (`crouch_lift`);
+    zeros without legs. Not spread in time: the lift is a smooth function of the hips' drop, as smooth
+    as the motion (spread over the contacts' ramps, a kneeling boxer's lift carried on as he got up)."""
+    from .contacts import find_ground
+
+    hips = [limbs[name].joints[0] for name in ("left_leg", "right_leg") if name in limbs]
+    if not hips or not len(positions):
+        return np.zeros((len(positions), 3))
+    ground = find_ground(skeleton, captured_pos, limbs)
+    above = ground.heights(np.stack([captured_pos[:, hips].mean(axis=1), positions[:, hips].mean(axis=1)], axis=1))
+    return crouch_lift(above[:, 0] - ground.floor, above[:, 1] - ground.floor, crouch)[:, None] * ground.up()
 
 
 #: The speed limit is said (with -v, and in the manifest's warnings) when it takes more than this
