@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -75,9 +75,19 @@ def _block(name: str) -> Callable[[PipelineConfig], Any]:
     return pick
 
 
+def _extrapolate_settings(config: PipelineConfig):
+    """The extrapolation's block, its crouch floor off where nothing plants the feet after it lifts the body
+    (contacts or the floor off: a lifted body's feet would hover)."""
+    block = config.extrapolate
+    if not block.enabled:
+        return None
+    planted = config.contacts.enabled and config.contacts.floor
+    return block if planted or block.crouch == 0 else replace(block, crouch=0.0)
+
+
 #: The blocks in the order they run.
 STAGES: tuple[Stage, ...] = (
-    Stage("extrapolate", extrapolate_stage, _block("extrapolate")),
+    Stage("extrapolate", extrapolate_stage, _extrapolate_settings),
     Stage("correct", correct_stage, _block("correct")),
     Stage("stretch", stretch_stage, lambda c: StretchPlan(c.stretch, c.auto_stretch, c.contacts)),
     Stage("subjoints", subjoints_stage, _block("subjoints")),

@@ -262,6 +262,27 @@ def test_the_squash_floor_is_smooth_in_time_and_off_at_zero():
     assert moved == 0 and np.array_equal(same, _squashed_chain(lengths))
 
 
+def test_the_squash_floor_keeps_a_captured_squash_and_gives_a_collapsed_link_the_captured_direction():
+    # A rig keyframed with a link at 0.3 of its rest length (the Quaternius robot's body squashes so):
+    # measured against the capture, the capture comes through untouched.
+    lengths = np.array([1.0, 0.6, 0.3, 0.3])
+    captured = _squashed_chain(lengths)
+    out, moved = floor_squash(captured, PARENTS, REST, 0.5, captured)
+    assert moved == 0 and np.array_equal(out, captured)
+    # Squashed further than the capture: floored from the captured length (half of 0.3 at most).
+    squashed = _squashed_chain(np.array([1.0, 0.6, 0.05, 0.3]))
+    out, moved = floor_squash(squashed, PARENTS, REST, 0.5, captured)
+    assert moved == 1 and 0.15 < out[2, 1, 0] < 0.16
+    # Collapsed to nothing (no direction of its own): the captured link's direction, at the floored length.
+    gone = squashed.copy()
+    gone[3, 1] = 0.0
+    gone[3, 2] = [0.0, 1.0, 0.0]
+    out, _ = floor_squash(gone, PARENTS, REST, 0.5, captured)
+    floored = 0.3 - (0.06 + 0.09 * np.tanh((0.3 - 0.06) / 0.09))  # the room 0.15 of 0.3, its knee 0.06
+    assert np.allclose(out[3, 1], [floored, 0.0, 0.0], rtol=0.0, atol=1e-12)
+    assert np.allclose(out[3, 2] - out[3, 1], [0.0, 1.0, 0.0])  # its child carried along
+
+
 def test_a_looney_jump_keeps_its_upper_arm_at_half_its_length_or_more():
     # The amc2bvh jump at looney: two arm joints pushed toward each other squashed the upper arm to 0.21
     # of its length after the correction (and to 0.16 in the end), and its sub-links spun as it came back.

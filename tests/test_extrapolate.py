@@ -328,8 +328,9 @@ def test_the_crouch_floor_by_hand_and_only_past_its_knee():
     # A drop of 0.6 becomes 0.2 + 0.3 tanh(0.4 / 0.3): lifted by the rest.
     assert lift[4] == pytest.approx(0.6 - (0.2 + 0.3 * np.tanh(0.4 / 0.3)), abs=1e-12)
     assert np.all(height + lift > 0.5)  # eased into the floor, never on it, even from below the ground
-    # (0, in the stage, is no crouch floor at all; the function's floor is then the ground itself.)
-    assert np.array_equal(crouch_lift(captured, height, 0.0)[:4], np.zeros(4))
+    # The lift is the drop's excess past the soft floor: a deeper drop is lifted more, never less.
+    drops = crouch_lift(np.ones(50), np.linspace(1.0, -1.0, 50), 0.5)
+    assert np.all(np.diff(drops) >= 0) and np.all(np.diff(np.linspace(1.0, -1.0, 50) + drops) <= 0)
 
 
 def _hips_ratio(motion, config) -> float:
@@ -358,6 +359,26 @@ def test_a_crouch_asked_to_stay_high_is_lifted_smoothly():
     quality = {name: motion_quality(motion, run(motion, config)) for name, config in (("free", free), ("high", high))}
     assert quality["high"]["jump_ratio"] <= quality["free"]["jump_ratio"] + 0.05
     assert quality["high"]["jerk_ratio"] <= quality["free"]["jerk_ratio"] + 0.05
+
+
+def test_the_crouch_floor_leaves_a_root_kept_as_captured_and_needs_the_contacts():
+    # --weight root=0 keeps the root's path as captured: the lift (driven by the thighs, still exaggerated)
+    # does not move it. And with the contacts or the floor off nothing would put the feet back down after
+    # the body is lifted: no lift then.
+    from mocap_exaggerate.config import resolve_config
+    from mocap_exaggerate.pipeline import pipeline_limbs, prepare
+    from mocap_exaggerate.stages.extrapolate import extrapolate_stage
+
+    motion, _ = read_bvh(SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh", fps=120.0)
+    high = {"extrapolate": {"crouch": 0.9}}
+    config = resolve_config("looney", None, {"extrapolate": {"crouch": 0.9, "weights": [["root", 0]]}})
+    state = prepare(motion, config.input, limbs=pipeline_limbs(motion.skeleton, config))
+    after = extrapolate_stage(state, config.extrapolate).positions[:, 0]
+    assert np.abs(after - motion.world_positions()[:, 0]).max() < 1e-12 * motion.skeleton.height()
+    for off in ({"enabled": False}, {"floor": False}):
+        plain = run(motion, resolve_config("looney", None, {"contacts": off, "extrapolate": {"crouch": 0.0}}))
+        asked = run(motion, resolve_config("looney", None, {"contacts": off, **high}))
+        assert np.array_equal(asked.world_positions, plain.world_positions)
 
 
 def test_a_jumps_crouch_no_longer_sinks_to_the_floor():

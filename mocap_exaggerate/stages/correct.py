@@ -302,17 +302,25 @@ def _rebuild(pos: np.ndarray, parents: np.ndarray, vec: np.ndarray, length: np.n
 _KNEE = 0.4
 
 
-def floor_squash(world_pos: np.ndarray, parents: np.ndarray, rest_lengths: np.ndarray,
-                 min_length: float) -> tuple[np.ndarray, int]:
+def floor_squash(world_pos: np.ndarray, parents: np.ndarray, rest_lengths: np.ndarray, min_length: float,
+                 captured: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Positions (a new array) with every link squashed toward ``min_length`` of its length eased off it.
 
     A link's shortening ``s = l - d`` is kept up to a knee of two fifths of
     the room, ``0.4 (1 - min_length) l``, and above it eases into ``(1 - min_length) l``
     (`soft_limit`: continuous with its first derivative, so a link squashing
-    smoothly comes back smoothly); the link keeps its direction and its
-    child carries its subtree. Placeholder links (under 1e-3 of the longest)
-    are left as they are. Returns the positions and how many frames moved;
-    frames with no link past the knee are copied unchanged.
+    smoothly comes back smoothly; ``min_length`` 1 is a hard floor at the
+    length); the link keeps its direction and its child carries its subtree.
+    Placeholder links (under 1e-3 of the longest) are left as they are.
+
+    captured : (F, J, 3) the positions the squash is measured against: a link
+        the capture itself has shorter (a keyframed squash, a rig's own) is
+        floored from that length, not its rest length, so the capture comes
+        through untouched; and a link squashed to nearly nothing (under 1e-6
+        of its length, no direction of its own) takes the captured one.
+
+    Returns the positions and how many frames moved; frames with no link past
+    the knee are copied unchanged.
 
     >>> pos = np.array([[[0.0, 0, 0], [0.1, 0, 0], [0.1, 1, 0]]])  # a 1-long link squashed to 0.1
     >>> out, moved = floor_squash(pos, np.array([-1, 0, 1]), np.array([0.0, 1.0, 1.0]), 0.5)
@@ -325,15 +333,29 @@ def floor_squash(world_pos: np.ndarray, parents: np.ndarray, rest_lengths: np.nd
         return out, 0
     vec = out[:, 1:] - out[:, parents[1:]]
     length = vector_norm(vec)
-    room = (1.0 - min_length) * links
+    full = links
+    if captured is not None:
+        full = np.minimum(links, vector_norm(captured[:, 1:] - captured[:, parents[1:]]))
+    room = (1.0 - min_length) * full
     knee = _KNEE * room
     counted = links > 1e-3 * links.max()
-    squashed = np.flatnonzero(((links - length > knee) & counted).any(axis=1))
+    # (past the knee by more than rounding: at min_length 1 the knee is the length itself)
+    squashed = np.flatnonzero(((full - length > knee + 1e-9 * links) & counted).any(axis=1))
     if not len(squashed):
         return out, 0
-    short = links - length[squashed]
-    new_len = np.where(counted, links - soft_limit(short, knee, room), length[squashed])
-    out[squashed] = _rebuild(out[squashed], parents, vec[squashed], length[squashed], new_len)
+    full = np.broadcast_to(full, length.shape)[squashed]
+    room, knee = np.broadcast_to(room, length.shape)[squashed], np.broadcast_to(knee, length.shape)[squashed]
+    vec, length = vec[squashed], length[squashed]
+    new_len = np.where(counted & (full - length > knee), full - soft_limit(full - length, knee, room), length)
+    along = length
+    if captured is not None:
+        # No direction of its own: the captured link's, scaled to the floored length.
+        lost = (length < 1e-6 * links) & counted
+        if lost.any():
+            was = captured[squashed][:, 1:] - captured[squashed][:, parents[1:]]
+            vec = np.where(lost[..., None], was, vec)
+            along = np.where(lost, vector_norm(was), length)
+    out[squashed] = _rebuild(out[squashed], parents, vec, along, new_len)
     return out, len(squashed)
 
 
@@ -386,7 +408,8 @@ def correct_stage(state: State, config: CorrectConfig) -> State:
         bent, skeleton.parents, skeleton.link_lengths(), threshold=config.threshold,
         delta=config.delta, max_stretch=max_stretch, max_iter=config.max_iter, smooth=smooth, hard=hard,
     )
-    body, floored = floor_squash(body, skeleton.parents, skeleton.link_lengths(), config.min_length)
+    body, floored = floor_squash(body, skeleton.parents, skeleton.link_lengths(), config.min_length,
+                                 state.captured_pos[first:])
     report = replace(report, frames_floored=floored)
     positions = state.positions.copy()
     positions[first:] = body

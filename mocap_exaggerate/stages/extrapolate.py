@@ -39,6 +39,7 @@ anticipation and settle survive.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -51,6 +52,7 @@ from ..core.rotations import vector_norm
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
 from ..core.timing import end_ramp, gaussian_average, parse_duration, smootherstep, soft_limit, spread_max, step_gain
+from .contacts import find_ground
 
 if TYPE_CHECKING:
     from .state import State
@@ -327,9 +329,12 @@ def extrapolate_stage(state: State, config: ExtrapolateConfig) -> State:
         torso=(torso_joints(skeleton, state.limbs), config.torso) if config.torso != 1 else None,
         riders=rider_joints(skeleton), return_limited=True,
     )
-    if config.crouch > 0:
-        positions[first:] += crouch_shift(positions[first:], state.captured_pos[first:], skeleton, state.limbs,
-                                          config.crouch)[:, None]
+    # The crouch floor, after the speed limit: added before it, the limit's per-joint gains bent the lift and
+    # stretched the legs (a squashed support leg asked for went to 0.75 where 0.5 was asked). It adds at most
+    # the hips' own drop speed; on the looney boxer one step reaches 1.757x its captured top against 1.75.
+    lift = crouch_floor(state.captured_pos[first:], skeleton, state.limbs, config.crouch, weights)
+    if lift is not None:
+        positions[first:] += lift(positions[first:])[:, None]
     report = speed_limit_report(limited, skeleton, config.max_speed, frame_time, first, sigma)
     if report is not None and report.joints:
         notes += (report.note(),)
@@ -361,20 +366,26 @@ def crouch_lift(captured: np.ndarray, height: np.ndarray, crouch: float) -> np.n
     return np.maximum(drop - soft_limit(drop, _CROUCH_KNEE * room, room), 0.0)
 
 
-def crouch_shift(positions: np.ndarray, captured_pos: np.ndarray, skeleton: Skeleton, limbs: dict,
-                 crouch: float) -> np.ndarray:
-    """(F, 3) the body's move up so its hips (the middle of the legs' base joints in ``positions`` (F, J, 3))
-    sink no lower above the captured floor than ``crouch`` times their captured height (`crouch_lift`);
-    zeros without legs. Not spread in time: the lift is a smooth function of the hips' drop, as smooth
-    as the motion (spread over the contacts' ramps, a kneeling boxer's lift carried on as he got up)."""
-    from .contacts import find_ground
-
+def crouch_floor(captured_pos: np.ndarray, skeleton: Skeleton, limbs: dict, crouch: float,
+                 weights: np.ndarray | None = None) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The crouch floor: ``positions (F, J, 3) -> (F, 3)``, the body's move up so
+    its hips (the middle of the legs' base joints) sink no lower above the captured floor than ``crouch``
+    times their captured height (`crouch_lift`), times the root's weight (at most 1: a root kept as
+    captured, ``--weight root=0``, is not lifted). None where there is nothing to do (``crouch`` 0, no legs,
+    a root weighted 0). Not spread in time: the lift is a smooth function of the hips' drop, as smooth as
+    the motion (spread over the contacts' ramps, a kneeling boxer's lift carried on as he got up)."""
     hips = [limbs[name].joints[0] for name in ("left_leg", "right_leg") if name in limbs]
-    if not hips or not len(positions):
-        return np.zeros((len(positions), 3))
+    share = 1.0 if weights is None else float(np.clip(weights[0], 0.0, 1.0))
+    if crouch <= 0 or not hips or share == 0 or not len(captured_pos):
+        return None
     ground = find_ground(skeleton, captured_pos, limbs)
-    above = ground.heights(np.stack([captured_pos[:, hips].mean(axis=1), positions[:, hips].mean(axis=1)], axis=1))
-    return crouch_lift(above[:, 0] - ground.floor, above[:, 1] - ground.floor, crouch)[:, None] * ground.up()
+    captured = ground.heights(captured_pos[:, hips].mean(axis=1)) - ground.floor
+
+    def lift(positions: np.ndarray) -> np.ndarray:
+        height = ground.heights(positions[:, hips].mean(axis=1)) - ground.floor
+        return share * crouch_lift(captured, height, crouch)[:, None] * ground.up()
+
+    return lift
 
 
 #: The speed limit is said (with -v, and in the manifest's warnings) when it takes more than this
