@@ -353,6 +353,13 @@ def _speed(points: np.ndarray, frame_time: float) -> np.ndarray:
     return vector_norm(velocity)
 
 
+#: A point held still this long (seconds) touches up to `STILL_BAND` times ``contacts.height`` over its lowest
+#: level (`detect_contacts`): a foot planted a little higher than its lowest step. Higher, a held foot is as
+#: likely a kick or a balance held in the air, whose exaggeration a contact would take away.
+STILL_HOLD = 0.25
+STILL_BAND = 2.5
+
+
 def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground, frame_time: float,
                     config: ContactConfig) -> np.ndarray:
     """Inclusive ``(start, end)`` frame ranges ``(R, 2)`` in which the effector touches the ground.
@@ -362,7 +369,12 @@ def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground
     slower than ``config.speed``; a contact holds while it stays within 1.5
     times that height and 1.6 times that speed, and lasts at least
     ``config.min_duration`` (unless the clip's first or last frame cuts it
-    short). The effector touches when any point does.
+    short). A point slower than ``config.speed`` for `STILL_HOLD` seconds or
+    more touches too, within `STILL_BAND` times that height: the iClone slow
+    walk's last step, planted 0.07 heights over its lowest level, slid 0.46
+    heights under the exaggeration (a step onto a rise 0.18 heights up, the
+    uneven walk's, is past that band and still slides). The effector touches
+    when any point does.
     """
     frames = captured_pos.shape[0]
     if frames < 3:
@@ -377,14 +389,18 @@ def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground
     speed = _speed(pos, frame_time) / h
     strict = (above < config.height * h) & (speed < config.speed) & reaches
     loose = (above < 1.5 * config.height * h) & (speed < 1.6 * config.speed) & reaches
+    held = (speed < config.speed) & (above < STILL_BAND * config.height * h) & reaches
+    hold = max(2, int(round(STILL_HOLD / frame_time)))
     touch = np.zeros(frames, bool)
     for p in range(len(points)):
         runs = _runs(loose[:, p])
-        if not len(runs):
-            continue
-        inside = np.cumsum(np.concatenate([[0], strict[:, p].astype(np.int64)]))
-        has_strict = inside[runs[:, 1] + 1] - inside[runs[:, 0]]
-        touch |= _mask_from_runs(runs[has_strict > 0], frames)
+        if len(runs):
+            inside = np.cumsum(np.concatenate([[0], strict[:, p].astype(np.int64)]))
+            has_strict = inside[runs[:, 1] + 1] - inside[runs[:, 0]]
+            touch |= _mask_from_runs(runs[has_strict > 0], frames)
+        still = _runs(held[:, p])
+        if len(still):
+            touch |= _mask_from_runs(still[still[:, 1] - still[:, 0] + 1 >= hold], frames)
     runs = _runs(touch)
     shortest = max(1, int(round(parse_duration(config.min_duration, frame_time, what="contacts.min_duration"))))
     # A contact cut off by the clip's first or last frame may have lasted longer than we see.
