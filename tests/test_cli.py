@@ -204,7 +204,7 @@ def test_rubber_options_and_original_skeleton(runner, sample_clip, tmp_path):
     info = json.loads((tmp_path / "a" / "cmu_09_01_run_daz.json").read_text())
     assert info["config"]["subjoints"]["per_link"] == 6
     assert info["config"]["springs"] == {"enabled": True, "stiffness": 100.0, "link_stiffness": 50.0,
-                                         "damping": 4.0, "blend": 0.7, "max_stretch": 1.3}
+                                         "damping": 4.0, "blend": 0.7, "max_stretch": 1.3, "min_length": 0.5}
     assert info["result"]["subjoints"] == read_bvh(tmp_path / "a" / "cmu_09_01_run_daz.bvh")[0].skeleton.num_joints
     assert ["chest", "lCollar", "lShldr", "lForeArm", "lHand"] in info["result"]["groups"]
     result = runner.invoke(cli, ["exaggerate", str(sample_clip), "-o", str(tmp_path / "b"), "--skeleton", "original"])
