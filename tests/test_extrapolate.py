@@ -180,7 +180,7 @@ def test_a_fast_moment_calms_only_itself_not_the_rest_of_the_clip():
     over keeps 4 % more of calm frames' exaggeration on the shared clips. Without a floor on a link's
     squash that tipped the looney amc2bvh jump past the quality bar for twist flips (57.9 -> 60.6
     degrees in a frame, its upper arm squashed to 15 % of its length); with the floor (correct.min_length,
-    springs.min_length) it takes the cartoon sit-down's jerk ratio from 1.95 to 1.99, at the bar of 2.0
+    springs.min_length) it takes the cartoon sit-down's jerk ratio from 1.91 to 1.99, at the bar of 2.0
     (docs/status.md)."""
     # Slow swings (a 600-frame period against sigma 12): exaggerated about 1.03x, well within the limit.
     t = np.arange(1200.0)[:, None, None]
