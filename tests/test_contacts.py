@@ -487,6 +487,24 @@ def test_a_foot_held_still_a_little_higher_touches_and_one_held_in_the_air_does_
     assert touching[95:133].all()  # still on the step for 0.4 s: planted there
     assert not touching[190:198].any()  # still 0.1 s on it: a pause
     assert not touching[245:275].any()  # held still in the air, 0.3 heights up: a kick held, not a step
+    # A hand is not held so (one that pauses in the air is not a contact): only the floor's band counts.
+    hand = detect_contacts(pos, Effector(0, (0,), points=(0,)), Ground(1, 1.0, 0.0, h), 1.0 / fps, ContactConfig(),
+                           foot=False)
+    assert not (contact_weights(hand, len(y), 0) > 0.5)[95:133].any()
+
+
+def test_a_held_foot_keeps_its_contact_through_a_blip_over_the_speed():
+    # Landing on a step and staying 0.5 s, but for three frames just over the speed (0.33 heights/s)
+    # right after landing: the contact starts at the landing, not after the blip.
+    fps, h = 120.0, 100.0
+    y = np.concatenate([np.zeros(60), np.linspace(0.0, 30.0, 20), np.linspace(30.0, 7.0, 30), np.full(90, 7.0)])
+    x = np.concatenate([np.zeros(60), np.linspace(0.0, 50.0, 50), np.full(90, 50.0)])
+    x[113:119] += np.cumsum(np.full(6, 0.36 * h / fps))  # the blip, 3 frames after landing
+    x[119:] = x[118]
+    pos = np.zeros((len(y), 1, 3))
+    pos[:, 0, 0], pos[:, 0, 1] = x, y
+    runs = detect_contacts(pos, Effector(0, (0,), points=(0,)), Ground(1, 1.0, 0.0, h), 1.0 / fps, ContactConfig())
+    assert len(runs) == 2 and runs[1][0] <= 111 and runs[1][1] == len(y) - 1, runs
 
 
 def test_a_slow_walk_stepping_higher_keeps_its_planted_foot():

@@ -361,7 +361,7 @@ STILL_BAND = 2.5
 
 
 def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground, frame_time: float,
-                    config: ContactConfig) -> np.ndarray:
+                    config: ContactConfig, *, foot: bool = True) -> np.ndarray:
     """Inclusive ``(start, end)`` frame ranges ``(R, 2)`` in which the effector touches the ground.
 
     A point of the effector (its joint or a rider with a link of its own)
@@ -369,12 +369,15 @@ def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground
     slower than ``config.speed``; a contact holds while it stays within 1.5
     times that height and 1.6 times that speed, and lasts at least
     ``config.min_duration`` (unless the clip's first or last frame cuts it
-    short). A point slower than ``config.speed`` for `STILL_HOLD` seconds or
-    more touches too, within `STILL_BAND` times that height: the iClone slow
-    walk's last step, planted 0.07 heights over its lowest level, slid 0.46
-    heights under the exaggeration (a step onto a rise 0.18 heights up, the
-    uneven walk's, is past that band and still slides). The effector touches
-    when any point does.
+    short). A ``foot``'s point slower than ``config.speed`` for `STILL_HOLD`
+    seconds or more touches too, within `STILL_BAND` times that height (0.1
+    heights at the default 0.04), and holds, with the same hysteresis, while
+    under 1.6 times that speed (a run the clip's ends cut needs the whole
+    0.25 s too): the iClone slow walk's last step, planted 0.07 heights over
+    its lowest level, slid 0.46 heights under the exaggeration. (The uneven
+    walk's step onto a rise, its toes 0.11-0.12 heights up, is just past that
+    band and still slides; a hand is not held so, as one that pauses in the
+    air is not a contact.) The effector touches when any point does.
     """
     frames = captured_pos.shape[0]
     if frames < 3:
@@ -389,7 +392,8 @@ def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground
     speed = _speed(pos, frame_time) / h
     strict = (above < config.height * h) & (speed < config.speed) & reaches
     loose = (above < 1.5 * config.height * h) & (speed < 1.6 * config.speed) & reaches
-    held = (speed < config.speed) & (above < STILL_BAND * config.height * h) & reaches
+    band = (above < STILL_BAND * config.height * h) & reaches & foot
+    held, held_loose = band & (speed < config.speed), band & (speed < 1.6 * config.speed)
     hold = max(2, int(round(STILL_HOLD / frame_time)))
     touch = np.zeros(frames, bool)
     for p in range(len(points)):
@@ -399,8 +403,13 @@ def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground
             has_strict = inside[runs[:, 1] + 1] - inside[runs[:, 0]]
             touch |= _mask_from_runs(runs[has_strict > 0], frames)
         still = _runs(held[:, p])
-        if len(still):
-            touch |= _mask_from_runs(still[still[:, 1] - still[:, 0] + 1 >= hold], frames)
+        seeds = still[still[:, 1] - still[:, 0] + 1 >= hold] if len(still) else still
+        if len(seeds):
+            # Held on through a blip over the speed (the uneven walk's landing ran 0.31-0.33 for three
+            # frames, which cut the plant's first 17 frames off): the looser runs that hold a long-still one.
+            runs = _runs(held_loose[:, p])
+            inside = np.cumsum(np.concatenate([[0], _mask_from_runs(seeds, frames).astype(np.int64)]))
+            touch |= _mask_from_runs(runs[inside[runs[:, 1] + 1] - inside[runs[:, 0]] > 0], frames)
     runs = _runs(touch)
     shortest = max(1, int(round(parse_duration(config.min_duration, frame_time, what="contacts.min_duration"))))
     # A contact cut off by the clip's first or last frame may have lasted longer than we see.
@@ -418,7 +427,9 @@ def find_contacts(skeleton: Skeleton, captured_pos: np.ndarray, frame_time: floa
         for joint in resolve_effector(name, skeleton, limbs, effectors, "contacts.joints", heights):
             if joint not in watched:
                 watched.append(joint)
-    return ground, {joint: detect_contacts(captured_pos, effectors[joint], ground, frame_time, config)
+    feet = {limb.end for name, limb in limbs.items() if name.endswith("_leg")}
+    return ground, {joint: detect_contacts(captured_pos, effectors[joint], ground, frame_time, config,
+                                           foot=joint in feet)
                     for joint in watched}
 
 
