@@ -98,10 +98,11 @@ class CorrectConfig:
         every frame, so the torso never stretches more than that (cartoon
         torsos stretch less than limbs). 1 treats them like any link.
     min_length : the squash floor: no link is squashed below this share of
-        its length; links at more than ``1 - 0.4 (1 - min_length)`` of it (0.8
+        its length (or of its captured length, where the capture has it
+        shorter); links at more than ``1 - 0.4 (1 - min_length)`` of it (0.8
         at 0.5) are left alone, shorter ones ease into the floor (see
-        `floor_squash`). 0 leaves squash unbounded, as the paper does; 1 lets
-        no link squash.
+        `floor_squash`). 0 leaves squash unbounded, as the paper does; 1 is a
+        hard floor at the length.
     """
 
     enabled: bool = setting(True, flag=Flag("--correct/--no-correct", "Switch link correction on or off."))

@@ -104,9 +104,10 @@ class ExtrapolateConfig:
     crouch : the hips sink no lower above the captured floor than this share
         of their captured height at that frame: a crouch exaggerated deeper
         eases into it, the whole body lifted (`crouch_lift`; the contacts then
-        plant the feet, the legs unfolding); 0 lets the body sink as the
-        exaggeration puts it (a jump's crouch went to a quarter of its height,
-        the legs crumpled under it).
+        plant the feet, the legs unfolding). Only with the contacts and the
+        floor on, and times the root's weight (a root weighted 0 stays as
+        captured); 0 lets the body sink as the exaggeration puts it (a jump's
+        crouch went to a quarter of its height, the legs crumpled under it).
     weights : ``(pattern, weight)`` pairs; a pattern is a joint name, a shell
         pattern (``Left*``) or a limb name (``left_arm``). A joint's effective
         omega is ``1 + weight * (omega - 1)``; weight 0 keeps it as captured.
