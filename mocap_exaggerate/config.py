@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, fields
 from importlib import resources
 from typing import Any
 
+from .analysis.loops import LOOP_MODES
 from .core.errors import ConfigError, InputError, check_choice, check_flag, check_number
 from .core.settings import Flag, setting
 from .io.bvh import BVH_POSITIONS, FPS_RANGE, ROOT_OFFSET_MODES, UP_AXES, check_bvh_positions
@@ -72,6 +73,10 @@ class InputConfig:
         to it (Reallusion/iClone, MakeHuman), or ``auto``: told apart per clip.
     up : the axis the body stands along, ``x``, ``y``, ``z``, or ``auto`` (from the rest pose).
     clip : with a glTF/GLB input, the animation to take, by name ("": the first; ``info`` lists them)
+    loop : ``auto`` runs a clip whose last frame repeats its first (a game's cycle) as that loop
+        repeated, so the output loops too; ``on`` takes any clip as a loop (its last frame leading
+        into its first where it does not repeat it); ``off`` takes every clip as a clip
+        (`mocap_exaggerate.analysis.loops`)
     """
 
     tpose: str = setting("auto", flag=Flag(
@@ -86,9 +91,13 @@ class InputConfig:
     clip: str = setting("", flag=Flag(
         "--clip", "With a .glb/.gltf input: the animation to take, by name (default: the first; info lists them).",
         metavar="NAME"))
+    loop: str = setting("auto", flag=Flag(
+        "--loop", "A looping cycle: auto (a clip whose last frame repeats its first is run as the loop repeated, "
+        "so the output loops too), on (any clip is a loop), off. Default auto.", choices=LOOP_MODES))
 
     def __post_init__(self) -> None:
         check_choice("input.tpose", self.tpose, _TPOSE_MODES)
+        check_choice("input.loop", self.loop, LOOP_MODES)
         if self.fps is not None:
             check_number("input.fps", self.fps, *FPS_RANGE)
         check_choice("input.root_offset", self.root_offset, ROOT_OFFSET_MODES)

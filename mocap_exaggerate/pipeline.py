@@ -184,8 +184,118 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
     an edited path that no stretch covers becomes an event of its own.
     ``stages`` is the declared list (default `STAGES`); it must end with a
     stage that sets ``state.output`` (orient).
+
+    A looping cycle (``input.loop``, `mocap_exaggerate.analysis.loops`) is run as the loop
+    repeated and cut back to its own frames, so the output loops too.
     """
     config = config or PipelineConfig()
+    loop, note = _loop_of(motion, config, paths)
+    if loop is None:
+        result = _run_stages(motion, config, paths, stages)
+        if note:
+            result.notes.insert(0, note)
+        return result
+    start = time.perf_counter()
+    extended = loop.extend(motion)
+    inner = replace(config, input=replace(config.input, tpose="keep"))  # a cycle has no rest pose to keep out
+    result = _cut(_run_stages(extended, inner, None, stages), loop, motion.num_frames)
+    result.timings["loop"] = time.perf_counter() - start - sum(result.timings.values())
+    result.notes.insert(0, loop.describe(motion.frame_time))
+    return result
+
+
+def _loop_of(motion: Motion, config: PipelineConfig, paths: dict | None):
+    """The clip as a `Loop` (None when it is not taken as one), and a note on why a loop was not kept."""
+    from .analysis.loops import find_loop, repeats_first
+
+    mode = config.input.loop
+    if mode == "off" or motion.num_frames < 3:
+        return None, None
+    if mode == "auto":  # two frames tell a clip that is no loop (every capture), at no cost
+        ends = Motion(motion.skeleton, motion.frame_time, motion.local_rotations[[0, -1]],
+                      motion.local_positions[[0, -1]])
+        if not repeats_first(ends, *_world(ends)):
+            return None, None
+    keyed = [what for what, given in (("stretches", config.stretch), ("targets", config.target),
+                                      ("a path file", paths)) if given]
+    if keyed:
+        if mode == "on":
+            raise ConfigError(f"input.loop = on: a clip with {' and '.join(keyed)} (keyed to its frames) cannot be "
+                              "run as a loop; take them off, or --loop off")
+        return None, (f"the clip's last frame repeats its first, but its {' and '.join(keyed)} are keyed to its "
+                      "frames: not run as a loop")
+    positions, rotations = _world(motion)
+    if config.input.tpose in ("auto", "drop") and detect_rest_frames(motion, positions) > 0:
+        return None, "the clip's ends meet, but it starts in a rest pose: not run as a loop"
+    return find_loop(motion, positions, rotations, mode), None
+
+
+def _world(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """World positions and rotations."""
+    rotations, positions = motion.forward_kinematics()
+    return positions, rotations
+
+
+def _cut(result: PipelineResult, loop, frames: int) -> PipelineResult:
+    """The run over the extended clip cut back to the clip's own frames (`Loop.middle`): every per-frame
+    array sliced, frame numbers in the reports moved, counts over the extension taken as the clip's share."""
+    keep = loop.middle(frames)
+    share = loop.period / len(result.world_positions)  # a count over the cycles run, for one
+
+    def frame_range(first: int, last: int) -> list[int] | None:  # an inclusive range moved onto the clip
+        first, last = max(first - keep.start, 0), min(last - keep.start, frames - 1)
+        return [first, last] if first <= last else None
+
+    def counted(value):
+        return int(round(value * share)) if isinstance(value, int) and not isinstance(value, bool) else value
+
+    motion = loop.close(result.motion.slice(keep))
+    world = result.world_positions[keep]
+    if loop.closed:
+        world = world.copy()
+        world[-1] = world[0] + loop.travel
+    stretch = result.stretch
+    if stretch is not None:
+        events = []
+        for event in stretch.events:
+            moved = frame_range(*event.frames)
+            if moved is not None:
+                events.append(replace(event, frames=tuple(moved)))
+        trails = []
+        for trail in stretch.trails:
+            on = [k for k, f in enumerate(trail["frames"]) if keep.start <= f < keep.stop]
+            if on:
+                trails.append({key: ([value[k] - keep.start if key == "frames" else value[k] for k in on]
+                                     if isinstance(value, (list, np.ndarray)) and len(value) == len(trail["frames"])
+                                     else value) for key, value in trail.items()})
+        stretch = replace(stretch, positions=stretch.positions[keep], stretch_factors=stretch.stretch_factors[keep],
+                          events=events, trails=trails)
+    constraints = result.constraints
+    if constraints is not None:
+        constraints = dict(constraints)
+        constraints["contacts"] = {name: [moved for a, b in runs if (moved := frame_range(a, b)) is not None]
+                                   for name, runs in constraints["contacts"].items()}
+        constraints["stretch_keys"] = [{**key, "frame": key["frame"] - keep.start}
+                                       for key in constraints["stretch_keys"] if keep.start <= key["frame"] < keep.stop]
+        constraints["body"] = {part: {what: counted(n) for what, n in counts.items()} if isinstance(counts, dict)
+                               else counted(counts) for part, counts in constraints["body"].items()}
+    correct_report = result.correct_report
+    if correct_report is not None:
+        correct_report = replace(correct_report, **{name: counted(getattr(correct_report, name)) for name in
+                                                    ("frames_corrected", "unconverged_frames", "frames_floored")})
+    speed_report = result.speed_report
+    if speed_report is not None and speed_report.seconds is not None:  # the same moment of the cycle in the clip
+        frame_time = result.motion.frame_time
+        first, last = (int(round(second / frame_time)) for second in speed_report.seconds)
+        moved = (first - keep.start) % loop.period
+        speed_report = replace(speed_report, seconds=(moved * frame_time, min(moved + last - first, frames - 1) *
+                                                      frame_time))
+    return replace(result, motion=motion, world_positions=world, stretch=stretch, constraints=constraints,
+                   correct_report=correct_report, speed_report=speed_report)
+
+
+def _run_stages(motion: Motion, config: PipelineConfig, paths: dict | None, stages: tuple[Stage, ...]) -> PipelineResult:
+    """`run` over the clip as it is."""
     timings: dict[str, float] = {}
     start = time.perf_counter()
     state = prepare(motion, config.input, limbs=pipeline_limbs(motion.skeleton, config), paths=paths)
