@@ -189,11 +189,11 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
     repeated and cut back to its own frames, so the output loops too.
     """
     config = config or PipelineConfig()
-    loop, note = _loop_of(motion, config, paths)
+    loop, note, warning = _loop_of(motion, config, paths)
     if loop is None:
         result = _run_stages(motion, config, paths, stages)
-        if note:
-            result.notes.insert(0, note)
+        result.notes[:0] = [note] if note else []
+        result.warnings[:0] = [warning] if warning else []
         return result
     start = time.perf_counter()
     extended = loop.extend(motion)
@@ -205,29 +205,30 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
 
 
 def _loop_of(motion: Motion, config: PipelineConfig, paths: dict | None):
-    """The clip as a `Loop` (None when it is not taken as one), and a note on why a loop was not kept."""
+    """The clip as a `Loop` (None when it is not taken as one), and a note or a warning on why a cycle was not
+    taken as one (a warning where the output will not loop: the cycle's frame-keyed requests)."""
     from .analysis.loops import find_loop, repeats_first
 
     mode = config.input.loop
     if mode == "off" or motion.num_frames < 3:
-        return None, None
+        return None, None, None
     if mode == "auto":  # two frames tell a clip that is no loop (every capture), at no cost
         ends = Motion(motion.skeleton, motion.frame_time, motion.local_rotations[[0, -1]],
                       motion.local_positions[[0, -1]])
         if not repeats_first(ends, *_world(ends)):
-            return None, None
+            return None, None, None
     keyed = [what for what, given in (("stretches", config.stretch), ("targets", config.target),
                                       ("a path file", paths)) if given]
     if keyed:
         if mode == "on":
             raise ConfigError(f"input.loop = on: a clip with {' and '.join(keyed)} (keyed to its frames) cannot be "
                               "run as a loop; take them off, or --loop off")
-        return None, (f"the clip's last frame repeats its first, but its {' and '.join(keyed)} are keyed to its "
-                      "frames: not run as a loop")
+        return None, None, (f"the clip's last frame repeats its first, but its {' and '.join(keyed)} are keyed to "
+                            "its frames: not run as a loop, so the output may not loop (--loop off says it is a clip)")
     positions, rotations = _world(motion)
     if config.input.tpose in ("auto", "drop") and detect_rest_frames(motion, positions) > 0:
-        return None, "the clip's ends meet, but it starts in a rest pose: not run as a loop"
-    return find_loop(motion, positions, rotations, mode), None
+        return None, "the clip's ends meet, but it starts in a rest pose: not run as a loop", None
+    return find_loop(motion, positions, rotations, mode), None, None
 
 
 def _world(motion: Motion) -> tuple[np.ndarray, np.ndarray]:

@@ -97,7 +97,7 @@ def test_frame_keyed_requests_keep_a_loop_a_clip_and_loop_on_refuses_them():
 
     targeted = replace(config, target=(parse_target("rHand@40"),))
     result = run(loop, targeted)
-    assert any("targets are keyed to its frames: not run as a loop" in note for note in result.notes)
+    assert any("targets are keyed to its frames: not run as a loop" in warning for warning in result.warnings)
     with pytest.raises(ConfigError, match="input.loop = on: a clip with targets"):
         run(loop, replace(targeted, input=replace(targeted.input, loop="on")))
 
