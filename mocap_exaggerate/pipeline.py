@@ -241,7 +241,7 @@ def _cut(result: PipelineResult, loop, frames: int) -> PipelineResult:
     """The run over the extended clip cut back to the clip's own frames (`Loop.middle`): every per-frame
     array sliced, frame numbers in the reports moved, counts over the extension taken as the clip's share."""
     keep = loop.middle(frames)
-    share = loop.period / len(result.world_positions)  # a count over the cycles run, for one
+    share = frames / loop.length  # a count over the frames run, for the clip's
 
     def frame_range(first: int, last: int) -> list[int] | None:  # an inclusive range moved onto the clip
         first, last = max(first - keep.start, 0), min(last - keep.start, frames - 1)

@@ -40,36 +40,33 @@ HALO = 5.0
 
 @dataclass(frozen=True)
 class Loop:
-    """A clip taken as a loop.
+    """A clip taken as a loop, and how it is run.
 
     period : frames in one cycle (a closed loop's last frame, its first again, is not counted)
     closed : the last frame repeats the first
     travel : (3,) the root's move over one cycle (0 for a cycle on the spot)
-    cycles : whole cycles run before the clip and after it (`HALO` seconds at least)
-    calm : the frame of the cycle where the body moves least: the extended clip starts (and ends) there
+    halo : frames of the cycle run before the clip
+    length : frames run in all (the clip, `halo` before it and the rest after it)
 
-    The clip extended is a whole number of cycles starting on the cycle's calmest frame, whichever
-    frame the clip starts on: the same frames in the same order for the same cycle. So what the
-    stages measure over the whole clip (top speeds, the floor's level, what the speed limit takes)
-    is the same, and the output is the same cycle, bit for bit, wherever the clip starts; the fades
-    at the extended clip's own ends fall where the body is calmest, many cycles from the clip.
+    A cycle shorter than `HALO` is run as a whole number of cycles starting on its calmest frame
+    (`find_loop`), whichever frame the clip starts on: the same frames in the same order for the
+    same cycle. So what the stages measure over the whole clip (top speeds, the floor's level, what
+    the speed limit takes) is the cycle's own, the output is the same cycle wherever the clip
+    starts, and the fades at the run's own ends fall where the body is calmest, cycles away from
+    the clip. A longer cycle has `HALO` seconds of itself on each side (a clip taken as a loop with
+    ``--loop on`` costs 10 s more, not three times itself).
     """
 
     period: int
     closed: bool
     travel: np.ndarray
-    cycles: int
-    calm: int = 0
-
-    @property
-    def halo(self) -> int:
-        """Frames run before the clip."""
-        return self.cycles * self.period + (-self.calm) % self.period
+    halo: int
+    length: int
 
     def extend(self, motion: Motion) -> Motion:
-        """The clip within `2 cycles + 2` cycles of itself (`halo` frames before it), its root carried on by
-        its travel."""
-        frames = np.arange(2 * (self.cycles + 1) * self.period) - self.halo  # 0: the clip's first frame
+        """The clip with `halo` frames of its cycle before it (`length` frames in all), its root carried on by
+        its travel per cycle."""
+        frames = np.arange(self.length) - self.halo  # 0: the clip's first frame
         cycle, source = np.divmod(frames, self.period)
         positions = motion.local_positions[source]
         positions[:, 0] += cycle[:, None] * self.travel
@@ -99,8 +96,8 @@ class Loop:
     def describe(self, frame_time: float) -> str:
         """What a note says of it."""
         kind = "its last frame repeating its first" if self.closed else "its last frame leading into its first"
-        return (f"a loop of {self.period} frames ({kind}): run as the loop repeated, {self.cycles} cycle(s) before and "
-                "after, so the output loops too (--loop off takes it as a clip)")
+        return (f"a loop of {self.period} frames ({kind}): run as the loop repeated, {self.halo * frame_time:.3g} s "
+                "before it, so the output loops too (--loop off takes it as a clip)")
 
 
 def find_loop(motion: Motion, world_pos: np.ndarray, world_rot: np.ndarray, mode: str = "auto") -> Loop | None:
@@ -121,13 +118,18 @@ def find_loop(motion: Motion, world_pos: np.ndarray, world_rot: np.ndarray, mode
         period, travel = frames - 1, root[-1] - root[0]
     else:  # the step from the last frame into the first is one more of the cycle's
         period, travel = frames, (root[-1] - root[0]) * frames / (frames - 1)
-    cycles = math.ceil(HALO / (period * motion.frame_time))
-    cycle = world_pos[:period] - world_pos[:period, :1]  # the body about its root, frame by frame
-    moves = vector_norm(np.roll(cycle, -1, axis=0) - cycle).sum(axis=1)  # the last frame leads into the first
-    if closed:
-        moves[-1] = vector_norm(world_pos[-1] - world_pos[-1, :1] - cycle[-1]).sum()
-    return Loop(period=period, closed=closed, travel=np.asarray(travel, dtype=np.float64), cycles=cycles,
-                calm=int(np.argmin(moves)))
+    travel = np.asarray(travel, dtype=np.float64)
+    halo = math.ceil(HALO / motion.frame_time)
+    if halo >= period:  # whole cycles from the calmest frame (`Loop`)
+        cycle = world_pos[:period] - world_pos[:period, :1]  # the body about its root, frame by frame
+        moves = vector_norm(np.roll(cycle, -1, axis=0) - cycle).sum(axis=1)  # the last frame leads into the first
+        if closed:
+            moves[-1] = vector_norm(world_pos[-1] - world_pos[-1, :1] - cycle[-1]).sum()
+        cycles = math.ceil(halo / period)
+        calm = int(np.argmin(moves))
+        return Loop(period, closed, travel, halo=cycles * period + (-calm) % period,
+                    length=2 * (cycles + 1) * period)
+    return Loop(period, closed, travel, halo=halo, length=frames + 2 * halo)
 
 
 def repeats_first(motion: Motion, world_pos: np.ndarray, world_rot: np.ndarray) -> bool:
