@@ -62,6 +62,9 @@ def info(input_path: Path, limbs: bool, groups: bool, contacts: bool, fps: float
                    f"{animation['channels']} channels{taken}")
     if data["rest_frames"]:
         say(f"  rest pose   {data['rest_frames']} leading synthetic frame(s) (see --tpose)")
+    if data["loop"]:
+        say(f"  loop        a cycle of {data['loop']['period']} frames, its last frame its first: exaggerated as "
+            "a loop (see --loop)")
     for warning in data["warnings"]:
         say(f"  warning     {warning}")
     if limbs:

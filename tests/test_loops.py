@@ -145,3 +145,12 @@ def test_loop_on_takes_an_open_cycle_whose_last_frame_leads_into_its_first():
     steps = np.linalg.norm(np.diff(relative, axis=0), axis=-1).max(axis=1)
     seam = np.linalg.norm(relative[0] - relative[-1], axis=-1).max()
     assert seam <= steps.max()
+
+
+@pytest.mark.skipif(not ROBOT.exists(), reason=f"the shared glTF robot is not at {ROBOT}")
+def test_info_says_which_clips_are_cycles():
+    from mocap_exaggerate.jobs.job import describe
+
+    assert describe(ROBOT, clip="Running")["loop"] == {"period": 23, "closed": True}
+    assert describe(ROBOT, clip="Death")["loop"] is None  # it ends lying down
+    assert describe(SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh")["loop"] is None

@@ -669,6 +669,11 @@ def describe(source: Source, *, fps: float | None = None, limbs: bool = False, g
         "rest_frames": detect_rest_frames(motion),
         "warnings": report.warnings,
     }
+    from ..analysis.loops import find_loop
+
+    rotations, positions = motion.forward_kinematics()
+    loop = None if data["rest_frames"] else find_loop(motion, positions, rotations)
+    data["loop"] = None if loop is None else {"period": loop.period, "closed": loop.closed}
     if is_gltf(source):
         data["clip"] = report.clip
         data["animations"] = gltf_animations(source)
