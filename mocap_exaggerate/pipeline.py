@@ -17,6 +17,7 @@ after them, and they are written back as captured.
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -31,6 +32,7 @@ from .config import DEFAULT_PRESET, InputConfig, PipelineConfig, load_preset
 from .core.errors import ConfigError
 from .core.motion import Motion
 from .core.skeleton import Skeleton
+from .core.timing import parse_duration
 from .stages.contacts import ConstraintPlan, constraints_stage
 from .stages.correct import CorrectReport, correct_stage, max_link_stretch
 from .stages.extrapolate import SpeedLimitReport, extrapolate_stage
@@ -189,6 +191,9 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
     repeated and cut back to its own frames, so the output loops too.
     """
     config = config or PipelineConfig()
+    fps = config.input.fps
+    if fps is not None and abs(motion.fps - fps) > 1e-9 * fps:
+        motion = motion.replace(frame_time=1.0 / fps)  # (as `prepare` does: the loop's halo is in seconds)
     loop, note, warning = _loop_of(motion, config, paths)
     if loop is None:
         result = _run_stages(motion, config, paths, stages)
@@ -198,7 +203,8 @@ def run(motion: Motion, config: PipelineConfig | None = None, *, paths: dict | N
     start = time.perf_counter()
     extended = loop.extend(motion)
     inner = replace(config, input=replace(config.input, tpose="keep"))  # a cycle has no rest pose to keep out
-    result = _cut(_run_stages(extended, inner, None, stages), loop, motion.num_frames)
+    result = _cut(_run_stages(extended, inner, None, stages, keep=loop.middle(motion.num_frames)), loop,
+                  motion.num_frames)
     result.timings["loop"] = time.perf_counter() - start - sum(result.timings.values())
     result.notes.insert(0, loop.describe(motion.frame_time))
     return result
@@ -220,21 +226,54 @@ def _loop_of(motion: Motion, config: PipelineConfig, paths: dict | None):
     keyed = [what for what, given in (("stretches", config.stretch), ("targets", config.target),
                                       ("a path file", paths)) if given]
     if keyed:
+        said = " and ".join(keyed)
         if mode == "on":
-            raise ConfigError(f"input.loop = on: a clip with {' and '.join(keyed)} (keyed to its frames) cannot be "
-                              "run as a loop; take them off, or --loop off")
-        return None, None, (f"the clip's last frame repeats its first, but its {' and '.join(keyed)} are keyed to "
-                            "its frames: not run as a loop, so the output may not loop (--loop off says it is a clip)")
+            raise ConfigError(f"input.loop = on: a clip with {said} (keyed to its frames) cannot be run as a loop; "
+                              "take them off, or --loop off")
+        return None, None, (f"the clip's last frame repeats its first, but it has {said}, keyed to its frames: not "
+                            "run as a loop, so the output may not loop (--loop off says it is a clip)")
     positions, rotations = _world(motion)
     if config.input.tpose in ("auto", "drop") and detect_rest_frames(motion, positions) > 0:
-        return None, "the clip's ends meet, but it starts in a rest pose: not run as a loop", None
-    return find_loop(motion, positions, rotations, mode), None, None
+        if mode == "on":
+            raise ConfigError("input.loop = on: the clip starts in a rest pose, which a cycle has not; --tpose keep "
+                              "takes it as a frame of the cycle, or --loop off")
+        return None, "the clip's last frame repeats its first, but it starts in a rest pose: not run as a loop", None
+    reach = 0.0
+    if config.extrapolate.enabled:  # a wide Gaussian reaches further than the halo's 5 s
+        reach = 10.0 * parse_duration(config.extrapolate.sigma, motion.frame_time,
+                                      what="extrapolate.sigma") * motion.frame_time
+    return find_loop(motion, positions, rotations, mode, reach=reach), None, None
 
 
 def _world(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
     """World positions and rotations."""
     rotations, positions = motion.forward_kinematics()
     return positions, rotations
+
+
+_SPAN = re.compile(r"frames (\d+)-(\d+)")
+_AT = re.compile(r"at frame (\d+)(?: \((-?[\d.]+) s\))?")
+
+
+def _moved_message(text: str, keep: slice, frames: int, frame_time: float) -> str | None:
+    """A note or warning of the run over the extended clip with its frame numbers moved onto the clip's (None
+    for one about frames outside it: the same moment of another cycle)."""
+    def span(match) -> str:
+        first, last = int(match[1]) - keep.start, int(match[2]) - keep.start
+        if last < 0 or first > frames - 1:
+            raise LookupError
+        return f"frames {max(first, 0)}-{min(last, frames - 1)}"
+
+    def at(match) -> str:
+        frame = int(match[1]) - keep.start
+        if not 0 <= frame < frames:
+            raise LookupError
+        return f"at frame {frame}" + (f" ({frame * frame_time:.2f} s)" if match[2] is not None else "")
+
+    try:
+        return _AT.sub(at, _SPAN.sub(span, text))
+    except LookupError:
+        return None
 
 
 def _cut(result: PipelineResult, loop, frames: int) -> PipelineResult:
@@ -291,12 +330,21 @@ def _cut(result: PipelineResult, loop, frames: int) -> PipelineResult:
         moved = (first - keep.start) % loop.period
         speed_report = replace(speed_report, seconds=(moved * frame_time, min(moved + last - first, frames - 1) *
                                                       frame_time))
+    frame_time = result.motion.frame_time
+    said = {result.speed_report.note(): speed_report.note()} if speed_report is not None and speed_report.joints else {}
+    notes, warnings = [], []
+    for kept, given in ((notes, result.notes), (warnings, result.warnings)):
+        for text in given:
+            moved = said.get(text) or _moved_message(text, keep, frames, frame_time)
+            if moved is not None and moved not in kept:
+                kept.append(moved)
     return replace(result, motion=motion, world_positions=world, stretch=stretch, constraints=constraints,
-                   correct_report=correct_report, speed_report=speed_report)
+                   correct_report=correct_report, speed_report=speed_report, notes=notes, warnings=warnings)
 
 
-def _run_stages(motion: Motion, config: PipelineConfig, paths: dict | None, stages: tuple[Stage, ...]) -> PipelineResult:
-    """`run` over the clip as it is."""
+def _run_stages(motion: Motion, config: PipelineConfig, paths: dict | None, stages: tuple[Stage, ...], *,
+                keep: slice = slice(None)) -> PipelineResult:
+    """`run` over the clip as it is (``keep``: the frames its largest stretch is measured over)."""
     timings: dict[str, float] = {}
     start = time.perf_counter()
     state = prepare(motion, config.input, limbs=pipeline_limbs(motion.skeleton, config), paths=paths)
@@ -326,7 +374,7 @@ def _run_stages(motion: Motion, config: PipelineConfig, paths: dict | None, stag
         timings=timings,
         correct_report=state.correct_report,
         speed_report=state.speed_report,
-        max_link_stretch=max_link_stretch(state.positions, skeleton.parents, skeleton.link_lengths()),
+        max_link_stretch=max_link_stretch(state.positions[keep], skeleton.parents, skeleton.link_lengths()),
         substeps=state.substeps,
         notes=list(state.notes),
         warnings=list(state.warnings),

@@ -97,7 +97,7 @@ def test_frame_keyed_requests_keep_a_loop_a_clip_and_loop_on_refuses_them():
 
     targeted = replace(config, target=(parse_target("rHand@40"),))
     result = run(loop, targeted)
-    assert any("targets are keyed to its frames: not run as a loop" in warning for warning in result.warnings)
+    assert any("it has targets, keyed to its frames: not run as a loop" in warning for warning in result.warnings)
     with pytest.raises(ConfigError, match="input.loop = on: a clip with targets"):
         run(loop, replace(targeted, input=replace(targeted.input, loop="on")))
 
@@ -126,6 +126,9 @@ def test_the_robots_run_cycle_loops_in_the_written_files(tmp_path):
     for world in (bvh, glb):  # (a BVH's Euler angles may differ by whole turns and still be the same pose)
         assert len(world) == 24
         assert np.abs(world[-1] - world[0]).max() < 1e-5 * height
+        # ... and the step into the last frame (the first again) is one like the others, not a jump
+        steps = np.linalg.norm(np.diff(world, axis=0), axis=-1).max(axis=1)
+        assert steps[-1] <= steps[:-1].max()
     off = run(read_gltf_motion(ROBOT, clip="Running")[0], _with_loop("cartoon", "off")).motion.world_positions()
     assert np.abs(off[-1] - off[0]).max() > 0.2 * height  # what it was
 
@@ -138,13 +141,80 @@ def test_loop_on_takes_an_open_cycle_whose_last_frame_leads_into_its_first():
 
     fox = read_gltf_motion(FOX, clip="Run")[0]
     assert not any("loop" in note for note in run(fox, _with_loop("cartoon", "auto")).notes)
-    result = run(fox, _with_loop("cartoon", "on"))
-    assert "its last frame leading into its first" in result.notes[0]
-    world = result.motion.world_positions()
-    relative = world - world[:, :1]
-    steps = np.linalg.norm(np.diff(relative, axis=0), axis=-1).max(axis=1)
-    seam = np.linalg.norm(relative[0] - relative[-1], axis=-1).max()
-    assert seam <= steps.max()
+    on = _with_loop("cartoon", "on")
+    assert "its last frame leading into its first" in run(fox, on).notes[0]
+    # The same open cycle started on its frame 11 gives the same cycle, moved on by 11 frames.
+    frames = fox.num_frames
+    started = _frames(fox, np.r_[np.arange(11, frames), np.arange(11)])
+    ours, moved = (run(clip, on).motion.world_positions() for clip in (fox, started))
+    height = fox.skeleton.height()
+    assert np.abs(np.roll(ours, -11, axis=0) - moved).max() < 1e-6 * height
+    off = _with_loop("cartoon", "off")
+    ours, moved = (run(clip, off).motion.world_positions() for clip in (fox, started))
+    assert np.abs(np.roll(ours, -11, axis=0) - moved).max() > 0.05 * height
+
+
+@pytest.mark.skipif(not ROBOT.exists(), reason=f"the shared glTF robot is not at {ROBOT}")
+def test_a_loops_notes_and_reports_number_the_clips_own_frames():
+    """The robot's Punch (a 21-key cycle) with --auto-stretch at looney: the strike in each of the cycles run
+    is said once, in the clip's frames, as the manifest has it; the largest stretch is the clip's own."""
+    from mocap_exaggerate.io.gltf_motion import read_gltf_motion
+
+    punch = read_gltf_motion(ROBOT, clip="Punch")[0]
+    config = _with_loop("looney", "auto")
+    config = replace(config, auto_stretch=replace(config.auto_stretch, enabled=True))
+    result = run(punch, config)
+    said = [note for note in result.notes if note.startswith("auto-stretch: ")]
+    events = result.stretch.events
+    assert len(said) == len(events) >= 1
+    for note, event in zip(said, events):
+        assert f"frames {event.frames[0]}-{event.frames[1]} " in note
+        assert 0 <= event.frames[0] <= event.frames[1] < punch.num_frames
+    for key in result.constraints["stretch_keys"]:
+        assert 0 <= key["frame"] < punch.num_frames
+    first, last = result.speed_report.seconds
+    assert 0 <= first <= last <= punch.duration + 1e-9
+    assert f"most from {first:.2f} to {last:.2f} s" in " ".join(result.notes)
+    assert len(result.world_positions) == punch.num_frames
+
+
+def test_frames_in_notes_move_onto_the_clip_or_go():
+    from mocap_exaggerate.pipeline import _moved_message
+
+    keep = slice(100, 130)
+    assert _moved_message("auto-stretch: right_arm frames 105-112 to 2 limb lengths", keep, 30, 0.1) == \
+        "auto-stretch: right_arm frames 5-12 to 2 limb lengths"
+    assert _moved_message("stretch left_leg frames 90-104: squashed", keep, 30, 0.1) == "stretch left_leg frames 0-4: squashed"
+    assert _moved_message("stretch left_leg at frame 140: the limb reaches 93%", keep, 30, 0.1) is None
+    assert _moved_message("the strongest candidate, right_arm at frame 112 (11.20 s): reach 0.9", keep, 30, 0.1) == \
+        "the strongest candidate, right_arm at frame 12 (1.20 s): reach 0.9"
+    assert _moved_message("springs: link stiffness 5 is more than 8 substeps", keep, 30, 0.1) == \
+        "springs: link stiffness 5 is more than 8 substeps"
+
+
+def test_a_long_cycle_has_five_seconds_either_side_and_a_short_one_at_most_64_cycles():
+    motion = load_bvh(SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh")
+    rotations, positions = motion.forward_kinematics()
+    loop = find_loop(motion, positions, rotations, "on")
+    halo = int(np.ceil(5.0 * motion.fps))
+    assert motion.num_frames > halo and loop.halo == halo and loop.length == motion.num_frames + 2 * halo
+    assert find_loop(motion, positions, rotations, "on", reach=8.0).halo == int(np.ceil(8.0 * motion.fps))
+    result = run(motion, _with_loop("cartoon", "on"))
+    assert result.motion.num_frames == motion.num_frames
+    three = _frames(motion, np.array([0, 1, 2])).replace(frame_time=1e-4)  # 3 frames at 10,000 fps
+    rotations, positions = three.forward_kinematics()
+    assert find_loop(three, positions, rotations, "on").length <= 2 * (64 + 1) * 3
+
+
+def test_loop_on_refuses_a_rest_pose_and_the_halo_is_in_the_configs_frame_rate():
+    motion = load_bvh(SAMPLE_DIR / "cmu_09_01_run_daz.bvh")  # its T-pose first
+    with pytest.raises(ConfigError, match="input.loop = on: the clip starts in a rest pose"):
+        run(motion, _with_loop("cartoon", "on"))
+    loop = _there_and_back()  # 120 fps, run at 240: 5 s is 1,200 frames, 14 whole cycles of 89 and a part
+    config = _with_loop("cartoon", "auto")
+    result = run(loop, replace(config, input=replace(config.input, fps=240.0)))
+    before = float(result.notes[0].split("run as the loop repeated, ")[1].split(" s before it")[0])
+    assert 5.0 <= before < 5.0 + 2 * 89 / 240  # (whole cycles, from the calmest frame)
 
 
 @pytest.mark.skipif(not ROBOT.exists(), reason=f"the shared glTF robot is not at {ROBOT}")

@@ -23,19 +23,23 @@ import numpy as np
 from ..core.motion import Motion
 from ..core.rotations import vector_norm
 
-__all__ = ["LOOP_MODES", "CLOSED", "HALO", "Loop", "find_loop", "repeats_first"]
+__all__ = ["LOOP_MODES", "CLOSED", "HALO", "MOST_CYCLES", "Loop", "find_loop", "repeats_first"]
 
 #: ``auto`` takes a clip whose last frame repeats its first as a loop; ``on`` takes every clip as
 #: one (its last frame leading into its first, where it does not repeat it); ``off`` takes none.
 LOOP_MODES = ("auto", "on", "off")
-#: A clip is a closed loop when no joint's place relative to the root, and not the root's own height
-#: and turn, differ between its last and first frames by more than this share of the body's height
-#: (a game cycle's repeat is exact; no capture comes back within a thousandth of a height).
+#: A clip is a closed loop when no joint's place relative to the root differs between its last and
+#: first frames by more than this share of the body's height, nor the root's turn by more than this
+#: many radians (a game cycle's repeat is exact; no capture comes back within a thousandth of a
+#: height). Where the root itself goes is free: that is the cycle's travel.
 CLOSED = 1e-3
 #: Seconds of the cycle run before and after it: past the reach of every time filter of the stages
 #: at any preset (the widest, the body pass's eased pushes and the extrapolation's band, reach 1.3
 #: and 1.2 s at looney), so the cycle's ends see what the cycle around them would be.
 HALO = 5.0
+#: At most this many whole cycles either side: a short cycle at a high frame rate (3 frames at
+#: 10,000 fps) would otherwise be run as 50,000 frames.
+MOST_CYCLES = 64
 
 
 @dataclass(frozen=True)
@@ -100,12 +104,16 @@ class Loop:
                 "before it, so the output loops too (--loop off takes it as a clip)")
 
 
-def find_loop(motion: Motion, world_pos: np.ndarray, world_rot: np.ndarray, mode: str = "auto") -> Loop | None:
+def find_loop(motion: Motion, world_pos: np.ndarray, world_rot: np.ndarray, mode: str = "auto", *,
+              reach: float = 0.0) -> Loop | None:
     """The clip as a loop (`Loop`), or None.
 
     world_pos, world_rot : (F, J, 3) and (F, J, 4) the clip's forward kinematics
     mode : `LOOP_MODES`: ``auto`` finds closed loops (`CLOSED`), ``on`` takes any clip of 3 frames or
-        more as a loop (closed where it is one, else its last frame leads into its first)
+        more as a loop (closed where it is one, else its last frame leads into its first); either
+        carries the root on by its travel per cycle, not by a turn (a cycle that turns, taken as a
+        loop with ``on``, is repeated facing one way)
+    reach : seconds the stages' filters reach, where more than `HALO` (a wide sigma)
     """
     if mode == "off" or motion.num_frames < 3:
         return None
@@ -119,13 +127,13 @@ def find_loop(motion: Motion, world_pos: np.ndarray, world_rot: np.ndarray, mode
     else:  # the step from the last frame into the first is one more of the cycle's
         period, travel = frames, (root[-1] - root[0]) * frames / (frames - 1)
     travel = np.asarray(travel, dtype=np.float64)
-    halo = math.ceil(HALO / motion.frame_time)
+    halo = math.ceil(max(HALO, reach) / motion.frame_time)
     if halo >= period:  # whole cycles from the calmest frame (`Loop`)
         cycle = world_pos[:period] - world_pos[:period, :1]  # the body about its root, frame by frame
         moves = vector_norm(np.roll(cycle, -1, axis=0) - cycle).sum(axis=1)  # the last frame leads into the first
         if closed:
             moves[-1] = vector_norm(world_pos[-1] - world_pos[-1, :1] - cycle[-1]).sum()
-        cycles = math.ceil(halo / period)
+        cycles = min(math.ceil(halo / period), MOST_CYCLES)
         calm = int(np.argmin(moves))
         return Loop(period, closed, travel, halo=cycles * period + (-calm) % period,
                     length=2 * (cycles + 1) * period)

@@ -642,11 +642,13 @@ def describe(source: Source, *, fps: float | None = None, limbs: bool = False, g
              contacts: bool = False, label: str | None = None, root_offset: str = "auto",
              up: str = "auto", clip: str = "") -> dict[str, Any]:
     """What ``info`` shows about a clip, as plain data (JSON-ready); a glTF's animations too."""
+    from ..analysis.loops import find_loop
     from ..config import InputConfig
     from ..io.gltf_motion import gltf_animations, is_gltf
 
     motion, report = read_clip(source, InputConfig(fps=fps, root_offset=root_offset, up=up, clip=clip), name=label)
     skeleton = motion.skeleton
+    rotations, positions = motion.forward_kinematics()
     orders: dict[str, int] = {}
     for j in range(skeleton.num_joints):
         if skeleton.channels[j]:
@@ -666,12 +668,9 @@ def describe(source: Source, *, fps: float | None = None, limbs: bool = False, g
         "up_axis": "XYZ"[skeleton.up_axis()],
         "root_offset": report.root_offset,
         "height": round(skeleton.height(), 4),
-        "rest_frames": detect_rest_frames(motion),
+        "rest_frames": detect_rest_frames(motion, positions),
         "warnings": report.warnings,
     }
-    from ..analysis.loops import find_loop
-
-    rotations, positions = motion.forward_kinematics()
     loop = None if data["rest_frames"] else find_loop(motion, positions, rotations)
     data["loop"] = None if loop is None else {"period": loop.period, "closed": loop.closed}
     if is_gltf(source):
