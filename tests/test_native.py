@@ -8,7 +8,9 @@ import json
 import os
 import subprocess
 import sys
+import threading
 
+import numpy as np
 import pytest
 
 from mocap_exaggerate.core import native
@@ -123,3 +125,23 @@ def test_a_process_forked_after_the_helper_started_makes_its_own():
     context = multiprocessing.get_context("fork")
     with context.Pool(1) as pool:
         assert pool.apply_async(_halves_in_a_child).get(timeout=60) == [1] * 10
+
+
+def test_work_shared_again_inside_a_shared_part_runs_whole(monkeypatch):
+    """A part of `on_both_cores` that asks to share its own work runs it whole (the one helper thread is busy
+    with the other part: waiting for it would never end), and `by_frame_halves` puts the halves back in order."""
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("one core: nothing is shared")
+    monkeypatch.setattr(native, "SHARE_FROM", 2)
+    inner = []
+    native.on_both_cores(lambda part: inner.append(native.frame_halves(100)), native.frame_halves(100))
+    assert inner == [[slice(0, 100)], [slice(0, 100)]]
+    assert native.frame_halves(100) == [slice(0, 50), slice(50, 100)]  # (and outside, shared again)
+    threads = set()
+
+    def make(part):
+        threads.add(threading.get_ident())
+        return np.arange(100)[part] * 2
+
+    assert native.by_frame_halves(make, 100).tolist() == list(range(0, 200, 2))
+    assert len(threads) == 2

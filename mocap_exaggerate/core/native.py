@@ -11,8 +11,9 @@ without a C compiler does: to check it, or to tell whether a fault is in the com
 from __future__ import annotations
 
 import os
+import threading
 
-__all__ = ["ENABLED", "NUMPY_ONLY", "kernels"]
+__all__ = ["ENABLED", "NUMPY_ONLY", "kernels", "frame_halves", "on_both_cores", "by_frame_halves"]
 
 #: The environment variable that turns the compiled loops off for a process (read at import).
 NUMPY_ONLY = "MOCAP_EXAGGERATE_NUMPY_ONLY"
@@ -30,6 +31,9 @@ if ENABLED:
 #: Frames below which a compiled loop is not shared between two threads (starting one costs more).
 SHARE_FROM = 4096
 _helper = None
+#: Set on a thread while it runs a part of `on_both_cores`: a part asking to share again runs whole
+#: (the one helper thread is busy with the other part; waiting for it there would never end).
+_sharing = threading.local()
 
 
 def _forget_helper() -> None:
@@ -46,7 +50,7 @@ if hasattr(os, "register_at_fork"):
 def frame_halves(frames: int, *, per_item: int = 1) -> list[slice]:
     """``range(frames)`` as two halves where a second core can take one (a long clip), else as one slice.
     ``per_item``: how many frames' work each item is (for items that are not frames)."""
-    if frames < 2 or frames * per_item < SHARE_FROM or (os.cpu_count() or 1) < 2:
+    if frames < 2 or frames * per_item < SHARE_FROM or (os.cpu_count() or 1) < 2 or getattr(_sharing, "on", False):
         return [slice(0, frames)]
     middle = frames // 2
     return [slice(0, middle), slice(middle, frames)]
@@ -67,9 +71,35 @@ def on_both_cores(run, parts: list[slice]) -> None:
         from concurrent.futures import ThreadPoolExecutor
 
         _helper = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mocap-kernels")
-    pending = [_helper.submit(run, part) for part in parts[:-1]]
+    pending = [_helper.submit(_shared, run, part) for part in parts[:-1]]
     try:
-        run(parts[-1])
+        _shared(run, parts[-1])
     finally:
         for job in pending:
             job.result()
+
+
+def _shared(run, part: slice) -> None:
+    _sharing.on = True
+    try:
+        run(part)
+    finally:
+        _sharing.on = False
+
+
+def by_frame_halves(make, frames: int, *, per_item: int = 1):
+    """``make(slice(0, frames))``, made as its two halves at once where `frame_halves` splits the frames.
+
+    For NumPy code whose every output frame is made from the same frame of its inputs alone
+    (element-wise operations and reductions within a frame): NumPy lets go of the GIL inside its
+    loops, so two threads share the work, and each frame's numbers are the ones a single call
+    makes. ``make`` returns an array whose first axis is the frames.
+    """
+    parts = frame_halves(frames, per_item=per_item)
+    if len(parts) < 2:
+        return make(parts[0])
+    made: dict[int, object] = {}
+    on_both_cores(lambda part: made.__setitem__(part.start, make(part)), parts)
+    import numpy as np
+
+    return np.concatenate([made[part.start] for part in parts])

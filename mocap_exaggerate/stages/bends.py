@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.native import by_frame_halves
 from ..core.rotations import vector_norm
 from ..core.timing import smootherstep
 
@@ -31,8 +32,14 @@ def keep_bends(positions: np.ndarray, captured: np.ndarray, hinges, *, margin: f
     limb's length (a C1 soft clamp, unchanged above twice that), with the
     correction faded out where the capture itself is nearly straight and
     says little about its side. Only the middle joint moves; the length
-    correction that follows mends the two links.
+    correction that follows mends the two links. Each frame on its own: a long
+    clip's two halves are made on two cores.
     """
+    positions = np.asarray(positions, dtype=np.float64)
+    return by_frame_halves(lambda part: _keep_bends(positions[part], captured[part], hinges, margin), len(positions))
+
+
+def _keep_bends(positions: np.ndarray, captured: np.ndarray, hinges, margin: float) -> np.ndarray:
     out = np.array(positions, dtype=np.float64)
     for hinge in hinges:
         base, middle, end = hinge[:3]
@@ -72,11 +79,18 @@ def keep_bends_on_rubber(sub_positions: np.ndarray, hierarchy, captured: np.ndar
 
     A middle joint (knee, elbow) that moves takes the sub-joints on the links either
     side with it in proportion to their place along them, so the limb bends at the
-    joint instead of kinking next to it.
+    joint instead of kinking next to it. Each frame on its own: a long clip's two halves are made
+    on two cores.
     """
-    out = np.array(sub_positions, dtype=np.float64)
+    sub_positions = np.asarray(sub_positions, dtype=np.float64)
     if not hinges:
-        return out
+        return sub_positions.copy()
+    return by_frame_halves(lambda part: _keep_bends_on_rubber(sub_positions[part], hierarchy, captured[part], hinges),
+                           len(sub_positions))
+
+
+def _keep_bends_on_rubber(sub_positions: np.ndarray, hierarchy, captured: np.ndarray, hinges) -> np.ndarray:
+    out = np.array(sub_positions, dtype=np.float64)
     joints = out[:, hierarchy.original]
     bent = keep_bends(joints, captured, hinges)
     for hinge in hinges:

@@ -27,6 +27,7 @@ import numpy as np
 from ..analysis.limbs import limb_hinges, limb_joints
 from ..core.errors import ConfigError, check_flag, check_number
 from ..core.kinematics import frame_blocks
+from ..core.native import frame_halves, on_both_cores
 from ..core.native import kernels as _kernels  # the compiled loops, where built (core/native.py)
 from ..core.rotations import vector_norm
 from ..core.settings import Flag, setting
@@ -402,8 +403,12 @@ def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray
     limited = limited[1:]
     rest = rest[1:][limited]
     way = (most - 1.0) * rest
-    for part in frame_blocks(len(out), 4096):  # per frame: in blocks, a long clip's temporaries stay small
-        _limit_block(out[part], before[part], parents, limited, rest, way, most, least)
+    def limit(frames: slice) -> None:  # each frame on its own: a long clip's halves on two cores
+        view, was = out[frames], before[frames]
+        for part in frame_blocks(len(view), 4096):  # in blocks, a long clip's temporaries stay small
+            _limit_block(view[part], was[part], parents, limited, rest, way, most, least)
+
+    on_both_cores(limit, frame_halves(len(out)))
     return out
 
 

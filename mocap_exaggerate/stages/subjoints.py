@@ -25,6 +25,7 @@ import numpy as np
 from ..analysis.branches import minor_branches, rubber_groups
 from ..core.errors import ConfigError, check_flag
 from ..core.kinematics import cache_blocks
+from ..core.native import by_frame_halves, frame_halves, on_both_cores
 from ..core.settings import Flag, setting
 from ..core.skeleton import POSITION_CHANNELS, Skeleton
 
@@ -312,9 +313,14 @@ def position_subjoints(world_pos: np.ndarray, hierarchy: SubjointHierarchy, rest
     """Sub-joint positions ``(F, J', 3)`` from original-joint positions ``(F, J, 3)``.
 
     Original joints stay where they are. Sub-joints in a rubber-joint group
-    lie on the group's Bézier curve; the others on the straight link.
+    lie on the group's Bézier curve; the others on the straight link. Each
+    frame on its own: a long clip's two halves are made on two cores.
     """
     world_pos = np.asarray(world_pos, dtype=np.float64)
+    return by_frame_halves(lambda part: _position_subjoints(world_pos[part], hierarchy, rest_lengths), len(world_pos))
+
+
+def _position_subjoints(world_pos: np.ndarray, hierarchy: SubjointHierarchy, rest_lengths: np.ndarray) -> np.ndarray:
     frames = world_pos.shape[0]
     count = hierarchy.skeleton.num_joints
     out = np.empty((frames, count, 3))
@@ -375,21 +381,28 @@ def even_out(positions: np.ndarray, hierarchy: SubjointHierarchy, links: np.ndar
     for child, members in by_link.items():
         head = int(hierarchy.original[hierarchy.link_parent[members[0]]])
         by_size.setdefault(len(members), []).append([head, *members, int(hierarchy.original[child])])
+    chains = []
     for rows in by_size.values():
         chain = np.array(rows)  # (L, m + 2): head, sub-joints, tail
         fraction = np.concatenate([np.zeros((len(chain), 1)), hierarchy.fraction[chain[:, 1:-1]],
                                    np.ones((len(chain), 1))], axis=1)
-        share = np.diff(fraction, axis=1)[None]  # (1, L, m + 1) of the chain's length
-        for part in cache_blocks(len(positions), chain.size):  # (each frame on its own: memory stays flat)
-            points = out[part][:, chain]  # (F, L, m + 2, 3); the heads and tails are never moved
-            steps = np.diff(points, axis=2)
-            lengths = np.sqrt(np.einsum("flkc,flkc->flk", steps, steps))
-            scale = np.divide(share * lengths.sum(axis=2, keepdims=True), lengths, out=np.zeros_like(lengths),
-                              where=lengths > 0)
-            even = steps * scale[..., None]
-            built = np.cumsum(even, axis=2)[:, :, :-1]  # from the head to each sub-joint
-            miss = (points[:, :, -1] - points[:, :, 0] - even.sum(axis=2))[:, :, None]
-            out[part, chain[:, 1:-1]] = points[:, :, :1] + built + fraction[None, :, 1:-1, None] * miss
+        chains.append((chain, fraction, np.diff(fraction, axis=1)[None]))  # share: (1, L, m + 1) of the length
+
+    def even(frames: slice) -> None:  # each frame on its own: a long clip's halves on two cores
+        view = out[frames]
+        for chain, fraction, share in chains:
+            for part in cache_blocks(len(view), chain.size):  # (memory stays flat)
+                points = view[part][:, chain]  # (F, L, m + 2, 3); the heads and tails are never moved
+                steps = np.diff(points, axis=2)
+                lengths = np.sqrt(np.einsum("flkc,flkc->flk", steps, steps))
+                scale = np.divide(share * lengths.sum(axis=2, keepdims=True), lengths, out=np.zeros_like(lengths),
+                                  where=lengths > 0)
+                even = steps * scale[..., None]
+                built = np.cumsum(even, axis=2)[:, :, :-1]  # from the head to each sub-joint
+                miss = (points[:, :, -1] - points[:, :, 0] - even.sum(axis=2))[:, :, None]
+                view[part, chain[:, 1:-1]] = points[:, :, :1] + built + fraction[None, :, 1:-1, None] * miss
+
+    on_both_cores(even, frame_halves(len(out)))
     return out
 
 
