@@ -25,6 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..core.native import by_frame_halves
 from ..core.rotations import vector_norm
 
 __all__ = ["Capsule", "Part", "body_capsules", "limb_parts", "segment_closest", "captured_sides", "penetrations",
@@ -130,7 +131,12 @@ def segment_closest(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarr
 
 def captured_sides(reference: np.ndarray, capsules: list[Capsule], parts: list[Part]) -> dict[tuple[str, int], np.ndarray]:
     """Per (part, capsule index) the way (F, 3) from the capsule's axis to the part in ``reference`` (the
-    capture), for `penetrations`: it does not change while the output is pushed, so it is found once."""
+    capture), for `penetrations`: it does not change while the output is pushed, so it is found once.
+    Each frame on its own: a long clip's two halves are made on two cores."""
+    return by_frame_halves(lambda frames: _captured_sides(reference[frames], capsules, parts), len(reference))
+
+
+def _captured_sides(reference: np.ndarray, capsules: list[Capsule], parts: list[Part]) -> dict:
     out = {}
     for part in parts:
         for index, capsule in enumerate(capsules):
@@ -152,7 +158,17 @@ def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Par
         axis (within half its radius) the way out is then the side the captured part is on, so a part
         passing through the axis is not pushed one way and then the other; elsewhere its own shortest
         way (pushed back across the body to the captured side, a hand went round and round it).
+
+    Each frame on its own: a long clip's two halves are made on two cores.
     """
+    def half(frames: slice) -> dict[str, tuple]:
+        sides = None if reference is None else {key: side[frames] for key, side in reference.items()}
+        return _penetrations(positions[frames], capsules, parts, sides)
+
+    return by_frame_halves(half, len(positions))
+
+
+def _penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Part], reference: dict | None) -> dict:
     by_name: dict[str, list[tuple[int, Capsule]]] = {}
     for index, capsule in enumerate(capsules):
         by_name.setdefault(capsule.name, []).append((index, capsule))

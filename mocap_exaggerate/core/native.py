@@ -93,13 +93,23 @@ def by_frame_halves(make, frames: int, *, per_item: int = 1):
     For NumPy code whose every output frame is made from the same frame of its inputs alone
     (element-wise operations and reductions within a frame): NumPy lets go of the GIL inside its
     loops, so two threads share the work, and each frame's numbers are the ones a single call
-    makes. ``make`` returns an array whose first axis is the frames.
+    makes. ``make`` returns an array whose first axis is the frames, or dicts, tuples and lists of
+    them (joined key by key, item by item).
     """
     parts = frame_halves(frames, per_item=per_item)
     if len(parts) < 2:
         return make(parts[0])
     made: dict[int, object] = {}
     on_both_cores(lambda part: made.__setitem__(part.start, make(part)), parts)
+    return _joined([made[part.start] for part in parts])
+
+
+def _joined(pieces: list):
+    first = pieces[0]
+    if isinstance(first, dict):
+        return {key: _joined([piece[key] for piece in pieces]) for key in first}
+    if isinstance(first, (tuple, list)):
+        return type(first)(_joined(list(items)) for items in zip(*pieces))
     import numpy as np
 
-    return np.concatenate([made[part.start] for part in parts])
+    return np.concatenate(pieces)

@@ -64,11 +64,19 @@ def motion_from_world(world_pos, world_rot, skeleton, frame_time, euler_hint=Non
     return Motion(skeleton, frame_time, local_rot, local_pos, euler_hint)
 
 
+def _centred(u: np.ndarray) -> bool:
+    """Whether `_fit_turn` fits the vectors ``u (F, n, 3)`` about their centroid: where they do not all start at
+    one point (told from the clip's middle frame)."""
+    middle = u[len(u) // 2]
+    centred = middle - middle.mean(axis=0)
+    return bool(vector_norm(centred).max() > 0.1 * vector_norm(middle).max())
+
+
 #: Weight of the pull toward "no turn" in `_fit_turn`, relative to the vectors' summed squared length.
 _STEADY = 0.001
 
 
-def _fit_turn(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+def _fit_turn(u: np.ndarray, v: np.ndarray, centre: bool | None = None) -> np.ndarray:
     """Rotations ``(F, 4)`` carrying vector sets ``u (F, n, 3)`` onto ``v (F, n, 3)``: Kabsch, held steady.
 
     The least-squares rotation of the vectors about their centroid (an SVD of
@@ -80,9 +88,9 @@ def _fit_turn(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     that pull, the smallest turn, instead of to noise: a TRIAD spun an
     exaggerated pelvis whose hips rose past it by 60 to 140 degrees in a frame.
     """
-    middle = u[len(u) // 2]
-    centred = middle - middle.mean(axis=0)
-    if vector_norm(centred).max() > 0.1 * vector_norm(middle).max():
+    if centre is None:
+        centre = _centred(u)
+    if centre:
         u = u - u.mean(axis=1, keepdims=True)  # a shift of all the children together is not a turn
         v = v - v.mean(axis=1, keepdims=True)
     cross_cov = np.einsum("fni,fnj->fij", v, u)
@@ -126,15 +134,14 @@ def recover_orientations(
     world[..., 3] = 1.0
 
     lengths = effective_lengths(skeleton)
+    fitted, kept = [], []  # (joint, its children at distance, fitted about their centroid); joints kept as captured
     single_joint, single_from, single_to = [], [], []
     for j in range(skeleton.num_joints):
         if rigid[j]:
             continue
         targets = first_below_at_distance(skeleton, j, rigid, lengths)
         if len(targets) >= 2:
-            u = source_pos[:, targets] - source_pos[:, j : j + 1]
-            v = new_pos[:, targets] - new_pos[:, j : j + 1]
-            world[:, j] = quat_mul(_fit_turn(u, v), source_rot[:, j])
+            fitted.append((j, targets, _centred(source_pos[:, targets] - source_pos[:, j : j + 1])))
             continue
         if len(targets) == 1:
             single_joint.append(j)
@@ -147,16 +154,27 @@ def recover_orientations(
                 single_from.append(above)
                 single_to.append(j)
             else:
-                world[:, j] = source_rot[:, j]
-    if single_joint:
-        # One vectorised call for every joint turned by a single link.
-        turn = quat_between(
-            source_pos[:, single_to] - source_pos[:, single_from], new_pos[:, single_to] - new_pos[:, single_from]
-        )
-        world[:, single_joint] = quat_normalize(quat_mul(turn, source_rot[:, single_joint]))
-    if pins is not None and len(pins[0]):
-        joints, weights = pins
-        world[:, joints] = quat_slerp(world[:, joints], source_rot[:, joints], weights)
+                kept.append(j)
+
+    def fit(frames: slice, was=source_pos, now=new_pos, turned=source_rot) -> None:
+        # (each frame on its own: a long clip's halves on two cores)
+        part = world[frames]
+        was, now, turned = was[frames], now[frames], turned[frames]
+        for j, targets, centre in fitted:
+            u = was[:, targets] - was[:, j : j + 1]
+            v = now[:, targets] - now[:, j : j + 1]
+            part[:, j] = quat_mul(_fit_turn(u, v, centre), turned[:, j])
+        part[:, kept] = turned[:, kept]
+        if single_joint:
+            # One vectorised call for every joint turned by a single link.
+            turn = quat_between(was[:, single_to] - was[:, single_from], now[:, single_to] - now[:, single_from])
+            part[:, single_joint] = quat_normalize(quat_mul(turn, turned[:, single_joint]))
+        if pins is not None and len(pins[0]):
+            joints, weights = pins
+            part[:, joints] = quat_slerp(part[:, joints], turned[:, joints], weights[frames])
+
+    on_both_cores(fit, frame_halves(frames))
+    del fit  # (it holds the positions, let go below)
     if max_speed > 0 and frames > 2:
         _calm_riders(world, new_pos, source_rot, source_pos, skeleton, rigid, max_speed,
                      max(int(round(0.05 / source.frame_time)), 2))
