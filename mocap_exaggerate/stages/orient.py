@@ -141,7 +141,8 @@ def recover_orientations(
             continue
         targets = first_below_at_distance(skeleton, j, rigid, lengths)
         if len(targets) >= 2:
-            fitted.append((j, targets, _centred(source_pos[:, targets] - source_pos[:, j : j + 1])))
+            middle = source_pos[frames // 2 : frames // 2 + 1]  # (what `_centred` reads of the whole clip)
+            fitted.append((j, targets, _centred(middle[:, targets] - middle[:, j : j + 1])))
             continue
         if len(targets) == 1:
             single_joint.append(j)
