@@ -73,9 +73,10 @@ def test_the_variable_turns_every_compiled_loop_off():
 
 
 def test_a_long_clip_shared_between_two_cores_is_the_same_bits(tmp_path, monkeypatch):
-    """From `native.SHARE_FROM` frames on, the compiled loops and the Gaussian's FFTs run in two halves on
-    two threads: every output byte as in one piece (each frame, each series, is made on its own). The
-    shipped and shared clips are all shorter, so one is tiled to 5,000 frames."""
+    """From `native.SHARE_FROM` frames on, the compiled loops, the Gaussian's FFTs and the per-frame NumPy work
+    (`native.by_frame_halves`) run in two halves on two threads: every output byte as in one piece (each
+    frame, each series, is made on its own). The shipped and shared clips are all shorter, so one is tiled
+    to 5,000 frames."""
     from mocap_exaggerate import convert
 
     data = (SAMPLE_DIR / "cmu_09_01_run_daz.bvh").read_bytes()
@@ -145,3 +146,13 @@ def test_work_shared_again_inside_a_shared_part_runs_whole(monkeypatch):
 
     assert native.by_frame_halves(make, 100).tolist() == list(range(0, 200, 2))
     assert len(threads) == 2
+    # Two parts asked for inside a part run there, one after the other (not waiting on the busy helper), and
+    # the rest of the outer part still runs whole.
+    after = []
+
+    def outer(part):
+        native.on_both_cores(lambda inner_part: None, [slice(0, 1), slice(1, 2)])
+        after.append(native.frame_halves(100))
+
+    native.on_both_cores(outer, native.frame_halves(100))
+    assert after == [[slice(0, 100)], [slice(0, 100)]]

@@ -1,4 +1,4 @@
-"""The compiled loops, where setup.py built them.
+"""The compiled loops, where setup.py built them, and the second core.
 
 ``kernels`` is ``core/_kernels.c`` (`io/bvh.py` takes ``io/_formatting.c`` itself, by `compiled`),
 None where it was not built or where ``MOCAP_EXAGGERATE_NUMPY_ONLY`` is set in the environment (to
@@ -6,6 +6,10 @@ anything but 0 or nothing). Every module with a compiled loop runs its NumPy cod
 None: the same bits, which the tests check loop by loop and, for whole jobs, by running the command
 with the variable set (`tests/test_native.py`). The variable runs the NumPy code as an install
 without a C compiler does: to check it, or to tell whether a fault is in the compiled code.
+
+A long clip's frames are shared between two threads (`on_both_cores`, `by_frame_halves`) by the
+compiled loops, which let go of the GIL, and by NumPy code that makes each frame from that frame
+alone (NumPy lets go of it inside its loops): each frame's numbers are a single call's.
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ if ENABLED:
         kernels = None
 
 
-#: Frames below which a compiled loop is not shared between two threads (starting one costs more).
+#: Frames below which work is not shared between two threads (starting one costs more).
 SHARE_FROM = 4096
 _helper = None
 #: Set on a thread while it runs a part of `on_both_cores`: a part asking to share again runs whole
@@ -48,7 +52,8 @@ if hasattr(os, "register_at_fork"):
 
 
 def frame_halves(frames: int, *, per_item: int = 1) -> list[slice]:
-    """``range(frames)`` as two halves where a second core can take one (a long clip), else as one slice.
+    """``range(frames)`` as two halves where a second core can take one (a long clip), else as one slice
+    (also inside a part of `on_both_cores`: the helper thread is busy with the other part).
     ``per_item``: how many frames' work each item is (for items that are not frames)."""
     if frames < 2 or frames * per_item < SHARE_FROM or (os.cpu_count() or 1) < 2 or getattr(_sharing, "on", False):
         return [slice(0, frames)]
@@ -59,11 +64,13 @@ def frame_halves(frames: int, *, per_item: int = 1) -> list[slice]:
 def on_both_cores(run, parts: list[slice]) -> None:
     """``run(part)`` for each part, the last on this thread and the others on a helper thread at once.
 
-    For the compiled loops, which let go of the GIL, work frame by frame, and write each frame where
-    only that frame's call writes: the same bits as one call, in about half the time on two cores.
+    For work that lets go of the GIL (the compiled loops, NumPy's), is done frame by frame, and writes
+    each frame where only that frame's call writes: the same bits as one call, in about half the
+    time on two cores. Inside a part of another call the parts run one after the other on this
+    thread (the one helper thread is busy with that call's other part: waiting for it would never end).
     """
     global _helper
-    if len(parts) < 2:
+    if len(parts) < 2 or getattr(_sharing, "on", False):
         for part in parts:
             run(part)
         return
@@ -80,11 +87,13 @@ def on_both_cores(run, parts: list[slice]) -> None:
 
 
 def _shared(run, part: slice) -> None:
+    """``run(part)`` as a part of `on_both_cores` (`_sharing` set meanwhile, and then as it was)."""
+    was = getattr(_sharing, "on", False)
     _sharing.on = True
     try:
         run(part)
     finally:
-        _sharing.on = False
+        _sharing.on = was
 
 
 def by_frame_halves(make, frames: int, *, per_item: int = 1):
@@ -109,7 +118,8 @@ def _joined(pieces: list):
     if isinstance(first, dict):
         return {key: _joined([piece[key] for piece in pieces]) for key in first}
     if isinstance(first, (tuple, list)):
-        return type(first)(_joined(list(items)) for items in zip(*pieces))
+        joined = [_joined(list(items)) for items in zip(*pieces)]
+        return type(first)(*joined) if hasattr(first, "_fields") else type(first)(joined)  # (a NamedTuple too)
     import numpy as np
 
     return np.concatenate(pieces)

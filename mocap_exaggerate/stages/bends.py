@@ -79,17 +79,10 @@ def keep_bends_on_rubber(sub_positions: np.ndarray, hierarchy, captured: np.ndar
 
     A middle joint (knee, elbow) that moves takes the sub-joints on the links either
     side with it in proportion to their place along them, so the limb bends at the
-    joint instead of kinking next to it. Each frame on its own: a long clip's two halves are made
-    on two cores.
+    joint instead of kinking next to it. (`keep_bends` shares a long clip's frames between two
+    cores; whether a hinge moves at all is told from the whole clip, as the sub-joints' moves are
+    added to every frame of a hinge that moves anywhere.)
     """
-    sub_positions = np.asarray(sub_positions, dtype=np.float64)
-    if not hinges:
-        return sub_positions.copy()
-    return by_frame_halves(lambda part: _keep_bends_on_rubber(sub_positions[part], hierarchy, captured[part], hinges),
-                           len(sub_positions))
-
-
-def _keep_bends_on_rubber(sub_positions: np.ndarray, hierarchy, captured: np.ndarray, hinges) -> np.ndarray:
     out = np.array(sub_positions, dtype=np.float64)
     joints = out[:, hierarchy.original]
     bent = keep_bends(joints, captured, hinges)

@@ -157,10 +157,9 @@ def recover_orientations(
             else:
                 kept.append(j)
 
-    def fit(frames: slice, was=source_pos, now=new_pos, turned=source_rot) -> None:
-        # (each frame on its own: a long clip's halves on two cores)
-        part = world[frames]
-        was, now, turned = was[frames], now[frames], turned[frames]
+    def fit(rows: slice, placed: np.ndarray = new_pos) -> None:  # each frame on its own: halves on two cores
+        part = world[rows]
+        was, now, turned = source_pos[rows], placed[rows], source_rot[rows]
         for j, targets, centre in fitted:
             u = was[:, targets] - was[:, j : j + 1]
             v = now[:, targets] - now[:, j : j + 1]
@@ -172,10 +171,10 @@ def recover_orientations(
             part[:, single_joint] = quat_normalize(quat_mul(turn, turned[:, single_joint]))
         if pins is not None and len(pins[0]):
             joints, weights = pins
-            part[:, joints] = quat_slerp(part[:, joints], turned[:, joints], weights[frames])
+            part[:, joints] = quat_slerp(part[:, joints], turned[:, joints], weights[rows])
 
     on_both_cores(fit, frame_halves(frames))
-    del fit  # (it holds the positions, let go below)
+    del fit  # (it holds ``new_pos``, which is let go below)
     if max_speed > 0 and frames > 2:
         _calm_riders(world, new_pos, source_rot, source_pos, skeleton, rigid, max_speed,
                      max(int(round(0.05 / source.frame_time)), 2))

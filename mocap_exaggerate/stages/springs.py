@@ -403,6 +403,7 @@ def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray
     limited = limited[1:]
     rest = rest[1:][limited]
     way = (most - 1.0) * rest
+
     def limit(frames: slice) -> None:  # each frame on its own: a long clip's halves on two cores
         view, was = out[frames], before[frames]
         for part in frame_blocks(len(view), 4096):  # in blocks, a long clip's temporaries stay small
