@@ -302,12 +302,11 @@ def _cut(result: PipelineResult, loop, frames: int) -> PipelineResult:
             if moved is not None:
                 events.append(replace(event, frames=tuple(moved)))
         trails = []
-        for trail in stretch.trails:
+        for trail in stretch.trails:  # (frames, original and exaggerated paths: lists a point a frame)
             on = [k for k, f in enumerate(trail["frames"]) if keep.start <= f < keep.stop]
             if on:
-                trails.append({key: ([value[k] - keep.start if key == "frames" else value[k] for k in on]
-                                     if isinstance(value, (list, np.ndarray)) and len(value) == len(trail["frames"])
-                                     else value) for key, value in trail.items()})
+                paths = {key: [trail[key][k] for k in on] for key in ("original", "exaggerated")}
+                trails.append({**trail, **paths, "frames": [trail["frames"][k] - keep.start for k in on]})
         stretch = replace(stretch, positions=stretch.positions[keep], stretch_factors=stretch.stretch_factors[keep],
                           events=events, trails=trails)
     constraints = result.constraints

@@ -172,6 +172,10 @@ def test_a_loops_notes_and_reports_number_the_clips_own_frames():
         assert 0 <= event.frames[0] <= event.frames[1] < punch.num_frames
     for key in result.constraints["stretch_keys"]:
         assert 0 <= key["frame"] < punch.num_frames
+    assert result.stretch.trails
+    for trail in result.stretch.trails:
+        assert all(0 <= f < punch.num_frames for f in trail["frames"])
+        assert len(trail["original"]) == len(trail["exaggerated"]) == len(trail["frames"])
     first, last = result.speed_report.seconds
     assert 0 <= first <= last <= punch.duration + 1e-9
     assert f"most from {first:.2f} to {last:.2f} s" in " ".join(result.notes)

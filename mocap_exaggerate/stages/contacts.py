@@ -344,6 +344,16 @@ def _mask_from_runs(runs: np.ndarray, length: int) -> np.ndarray:
     return np.cumsum(marks[:-1]) > 0
 
 
+def _runs_holding(loose: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """(F,) bool: the runs of ``loose`` (F,) that hold a frame of ``seed`` (F,) (a hysteresis: entered on the
+    strict condition, held on the loose one)."""
+    runs = _runs(loose)
+    if not len(runs):
+        return np.zeros(len(loose), bool)
+    inside = np.cumsum(np.concatenate([[0], seed.astype(np.int64)]))
+    return _mask_from_runs(runs[inside[runs[:, 1] + 1] - inside[runs[:, 0]] > 0], len(loose))
+
+
 def _speed(points: np.ndarray, frame_time: float) -> np.ndarray:
     """Speed ``(F, P)`` of points ``(F, P, 3)`` by central differences over a light smoothing."""
     from ..core.timing import gaussian_average
@@ -397,19 +407,13 @@ def detect_contacts(captured_pos: np.ndarray, effector: Effector, ground: Ground
     hold = max(2, int(round(STILL_HOLD / frame_time)))
     touch = np.zeros(frames, bool)
     for p in range(len(points)):
-        runs = _runs(loose[:, p])
-        if len(runs):
-            inside = np.cumsum(np.concatenate([[0], strict[:, p].astype(np.int64)]))
-            has_strict = inside[runs[:, 1] + 1] - inside[runs[:, 0]]
-            touch |= _mask_from_runs(runs[has_strict > 0], frames)
+        touch |= _runs_holding(loose[:, p], strict[:, p])
         still = _runs(held[:, p])
         seeds = still[still[:, 1] - still[:, 0] + 1 >= hold] if len(still) else still
         if len(seeds):
             # Held on through a blip over the speed (the uneven walk's landing ran 0.31-0.33 for three
             # frames, which cut the plant's first 17 frames off): the looser runs that hold a long-still one.
-            runs = _runs(held_loose[:, p])
-            inside = np.cumsum(np.concatenate([[0], _mask_from_runs(seeds, frames).astype(np.int64)]))
-            touch |= _mask_from_runs(runs[inside[runs[:, 1] + 1] - inside[runs[:, 0]] > 0], frames)
+            touch |= _runs_holding(held_loose[:, p], _mask_from_runs(seeds, frames))
     runs = _runs(touch)
     shortest = max(1, int(round(parse_duration(config.min_duration, frame_time, what="contacts.min_duration"))))
     # A contact cut off by the clip's first or last frame may have lasted longer than we see.
