@@ -297,6 +297,38 @@ def test_an_output_set_is_renamed_only_on_commit(tmp_path):
     assert (tmp_path / "x.bin").read_bytes() == b"abc" and not list(tmp_path.glob(".*.tmp"))
 
 
+def test_a_reserved_file_keeps_its_place_in_the_renames_and_may_be_written_on_another_thread(tmp_path, monkeypatch):
+    """The job writes the GLB on the thread that builds it while the BVH is written: the GLB's place among the
+    renames is the one it was reserved in, its digest its bytes'; a file reserved and never written is
+    not renamed onto its target, and leaves no temporary."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    from mocap_exaggerate.io import files
+
+    order, real = [], os.replace
+    with OutputSet(overwrite=True) as written, ThreadPoolExecutor(max_workers=1) as pool:
+        glb = written.reserve(tmp_path / "clip.glb")
+        unused = written.reserve(tmp_path / "clip.usdc")
+        digest = pool.submit(glb, [b"gl", b"TF"])
+        written.add(tmp_path / "clip.bvh", b"motion")
+        written.add(tmp_path / "clip.json", b"manifest")
+        assert digest.result() == "sha256:" + hashlib.sha256(b"glTF").hexdigest()
+        assert unused is not None
+        monkeypatch.setattr(files.os, "replace", lambda a, b: (order.append(Path(b).name), real(a, b)))
+        written.commit(late=[tmp_path / "clip.bvh"])
+    assert order == ["clip.glb", "clip.bvh", "clip.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.bvh", "clip.glb", "clip.json"]
+    assert (tmp_path / "clip.glb").read_bytes() == b"glTF"
+
+
+def test_an_aborted_set_removes_a_reserved_file_written_or_not(tmp_path):
+    with OutputSet() as written:
+        written.reserve(tmp_path / "a.glb")(b"data")
+        written.reserve(tmp_path / "b.glb")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_stage_added_to_the_declared_list_runs_in_its_place(sample_clip):
     motion, _ = read_bvh(sample_clip)
     # Contacts off: they would put the lifted feet back where they were captured.

@@ -11,7 +11,9 @@ import secrets
 import stat
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from ..core.errors import InputError, MocapError
 
@@ -170,13 +172,22 @@ class OutputSet:
         self.pending: list[tuple[str, Path]] = []
         self.created: list[Path] = []  # folders made for the set, removed again by abort
         self.live: list[int] = []  # locks on the temporary files, held until the set is in place (`_live`)
+        self.unwritten: dict[str, int] = {}  # temporary -> its descriptor, for files reserved and not yet written
+        self.written: set[str] = set()  # temporaries whose data is all written
 
     def add(self, path: str | os.PathLike, data) -> str:
         """Write ``data`` to a temporary file for ``path``; its ``sha256:<hex>`` digest."""
+        return self.reserve(path)(data)
+
+    def reserve(self, path: str | os.PathLike) -> Callable[[Any], str]:
+        """A temporary file for ``path``, its place among the renames taken now; the function that writes
+        ``data`` into it and returns its digest, once. It touches nothing of the set: it may run on another
+        thread (the job writes the GLB on the thread that built it while the BVH is written), as long as
+        that thread is done before the set is committed or aborted. A file reserved and never written is
+        not renamed onto its target."""
         path = Path(path)
         if path.exists() and not self.overwrite:
             raise OutputExistsError(path)
-        digest = hashlib.sha256()
         folder = path.parent if str(path.parent) else Path(".")
         try:
             missing = [f for f in (folder, *folder.parents) if not f.exists()]
@@ -191,22 +202,30 @@ class OutputSet:
                 os.rename(new, tmp)
             except OSError:
                 _remove(new)
+                os.close(fd)
                 raise
         except OSError as error:
             raise OSError(error.errno, error.strerror or str(error), str(path)) from None
         self.pending.append((tmp, path))
-        try:
-            with os.fdopen(fd, "wb") as handle:
-                for piece in [data] if isinstance(data, (bytes, bytearray, memoryview)) else data:
-                    handle.write(piece)
-                    digest.update(piece)
-                handle.flush()
-                os.fsync(handle.fileno())
-            os.chmod(tmp, 0o644)
-        except OSError as error:
-            # Name the file the user asked for, not our temporary one.
-            raise OSError(error.errno, error.strerror or str(error), str(path)) from None
-        return "sha256:" + digest.hexdigest()
+        self.unwritten[tmp] = fd
+
+        def write(data) -> str:
+            digest = hashlib.sha256()
+            try:
+                with os.fdopen(self.unwritten.pop(tmp), "wb") as handle:
+                    for piece in [data] if isinstance(data, (bytes, bytearray, memoryview)) else data:
+                        handle.write(piece)
+                        digest.update(piece)
+                    handle.flush()
+                    os.fsync(handle.fileno())
+                os.chmod(tmp, 0o644)
+            except OSError as error:
+                # Name the file the user asked for, not our temporary one.
+                raise OSError(error.errno, error.strerror or str(error), str(path)) from None
+            self.written.add(tmp)
+            return "sha256:" + digest.hexdigest()
+
+        return write
 
     def commit(self, *, retire_first: list[Path] = (), late: list[Path] = ()) -> None:
         """Rename every temporary file onto its target, in order.
@@ -216,6 +235,10 @@ class OutputSet:
             a half-replaced set) and old outputs this set no longer has.
         late : targets renamed after the others but before the last one added (the manifest)
         """
+        for tmp, path in [item for item in self.pending if item[0] not in self.written]:  # reserved, never written
+            self.pending.remove((tmp, path))
+            os.close(self.unwritten.pop(tmp))
+            _remove(tmp)
         if late and len(self.pending) > 1:
             last = self.pending[-1]
             late_set = {Path(path) for path in late}
@@ -281,6 +304,9 @@ class OutputSet:
 
     def _let_go(self) -> None:
         """Release the temporary files' locks (each now a target, or removed)."""
+        for fd in self.unwritten.values():
+            os.close(fd)
+        self.unwritten.clear()
         for live in self.live:
             os.close(live)  # (closing releases the lock)
         self.live.clear()

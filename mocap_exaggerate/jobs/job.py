@@ -369,14 +369,17 @@ def convert(
         remove_stale_temporaries(target, keep=inputs)  # what a killed earlier run of these outputs left
     info = None
     outputs: dict[str, Any] = {}
-    with ThreadPoolExecutor(max_workers=1) as pool, OutputSet(overwrite=True) as written:
-        # The GLB is built while the BVH is formatted and written: both spend most of
-        # their time in NumPy, which lets go of the GIL, so two cores share the work.
+    # (The pool inside the set: its thread is done before the set is committed or aborted.)
+    with OutputSet(overwrite=True) as written, ThreadPoolExecutor(max_workers=1) as pool:
+        # The GLB is built and written while the BVH is formatted and written: both spend most of
+        # their time in NumPy, C and the file system, which let go of the GIL, so two cores share the work.
         if glb:
             from .outputs import glb_files
 
-            building = pool.submit(_timed, glb_files, motion, result, skin, glb_units, character.influences,
-                                   None, usd)
+            slots = {kind: written.reserve(targets[kind]) for kind in ("glb", "weights", "usd")
+                     if kind != "usd" or usd}
+            building = pool.submit(_built_and_written, slots, glb_files, motion, result, skin, glb_units,
+                                   character.influences, None, usd)
         else:
             building = None
         tick = time.perf_counter()
@@ -389,12 +392,9 @@ def convert(
             outputs["bvh"] = written.add(targets["bvh"], iter_bvh(result.motion, positions=config.output.bvh_positions))
         timings["write"] = time.perf_counter() - tick
         if building is not None:
-            files, timings["glb"] = building.result()
+            files, timings["glb"], digests = building.result()
             units_used = files.units
-            outputs["glb"] = written.add(targets["glb"], files.glb)
-            outputs["weights"] = written.add(targets["weights"], files.weights)
-            if files.usd is not None:
-                outputs["usd"] = written.add(targets["usd"], files.usd)
+            outputs.update(digests)
             if fbx:
                 from ..io.fbx import glb_to_fbx
 
@@ -636,6 +636,17 @@ def read_clip(source: Source, settings, *, name: str | None = None, data: bytes 
 def _timed(func, *args):
     tick = time.perf_counter()
     return func(*args), time.perf_counter() - tick
+
+
+def _built_and_written(slots: dict, build, *args) -> tuple[Any, float, dict[str, str]]:
+    """The character's files built by ``build(*args)`` (`glb_files`), the seconds that took, and the
+    digests of the files written into ``slots`` (kind -> `OutputSet.reserve`'s writer), in the GLB,
+    weights, USD order of the manifest."""
+    files, seconds = _timed(build, *args)
+    digests = {"glb": slots["glb"](files.glb), "weights": slots["weights"](files.weights)}
+    if "usd" in slots:
+        digests["usd"] = slots["usd"](files.usd)
+    return files, seconds, digests
 
 
 def describe(source: Source, *, fps: float | None = None, limbs: bool = False, groups: bool = False,
