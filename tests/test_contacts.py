@@ -437,6 +437,46 @@ def test_an_ease_along_a_fast_move_is_longer_than_one_against_it():
     assert step.max() <= 0.05 + 1e-12
 
 
+def test_eases_worked_out_for_every_run_at_once_are_each_run_s_own(monkeypatch):
+    """`ease_lengths` works out every run's sides at once, the shortest ease first: each side's length is
+    the one its own sums give, worked out alone for every length (random paths, shifts that make
+    some sides take the shortest ease, some a longer one, and some none that fits)."""
+    from mocap_exaggerate.core.rotations import vector_norm
+    from mocap_exaggerate.stages import contacts
+    from mocap_exaggerate.stages.contacts import ease_lengths, smootherstep
+
+    rng = np.random.default_rng(3)
+    frames, ramp, longest = 400, 3.0, 20
+    paths = np.cumsum(rng.normal(scale=0.02, size=(frames, 2, 3)), axis=0)
+    # (held over 40 frames, at one of three sizes: a side fits the shortest ease, a longer one or none)
+    shift = np.repeat(rng.normal(scale=rng.choice([0.01, 0.3, 3.0], size=(frames // 40, 1)), size=(frames // 40, 3)),
+                      40, axis=0)
+    starts = np.sort(rng.choice(np.arange(5, frames - 5), size=40, replace=False)).reshape(-1, 2)
+    limits = np.array([0.05, 0.08])
+    got = ease_lengths(starts, paths, shift, limits, ramp, longest)
+    monkeypatch.setattr(contacts, "_EASE_BLOCK", 7)  # blocks of sides that cut runs in two
+    np.testing.assert_array_equal(ease_lengths(starts, paths, shift, limits, ramp, longest), got)
+
+    distance = np.arange(longest + 2)
+    lengths = np.arange(int(np.ceil(ramp)), longest + 1)
+    weights = smootherstep(np.clip(1.0 - distance[None, :] / (lengths[:, None] + 1.0), 0.0, 1.0))
+    expected, unfit = np.empty(starts.shape), 0
+    for row, (first, last) in enumerate(starts):
+        for side, (start, direction) in enumerate(((first, -1), (last, 1))):
+            reach = np.clip(start + direction * distance, 0, frames - 1)
+            own = vector_norm(np.diff(paths[reach], axis=0))
+            eased = paths[reach][None] + weights[:, :, None, None] * shift[reach][None, :, None, :]
+            steps = vector_norm(np.diff(eased, axis=1))
+            allowed = np.broadcast_to(np.maximum(own, limits)[None], steps.shape)
+            ratio = np.divide(steps, allowed, out=np.where(steps > 0, np.inf, 0.0), where=allowed > 0)
+            worst = ratio.max(axis=(1, 2))
+            fits = np.flatnonzero(worst <= 1.0 + 1e-9)
+            expected[row, side] = lengths[fits[0]] if len(fits) else lengths[int(np.argmin(worst))]
+            unfit += not len(fits)
+    np.testing.assert_array_equal(got, expected)
+    assert (expected == lengths[0]).any() and (expected > lengths[0]).any() and unfit  # (each way tried)
+
+
 def test_a_boxer_kneeling_at_looney_keeps_his_thighs_and_his_height():
     # The assimp boxer kneels on the canvas and gets up (frames 2880-2970). At looney the body pass lifted
     # him off the knelt-on shin once per round (0.31 heights above the capture, frame 2933) and a knee

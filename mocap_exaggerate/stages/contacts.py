@@ -510,19 +510,42 @@ def ease_lengths(runs: np.ndarray, paths: np.ndarray, shift: np.ndarray, limits:
     lengths = np.arange(int(np.ceil(ramp)), longest + 1)
     weights = smootherstep(np.clip(1.0 - distance[None, :] / (lengths[:, None] + 1.0), 0.0, 1.0))  # (R, d)
     out = np.empty((len(runs), 2))
-    for row, (first, last) in enumerate(runs):  # a loop over contacts, not frames
-        for side, (start, direction) in enumerate(((first, -1), (last, 1))):
-            reach = np.clip(start + direction * distance, 0, frames - 1)
-            own = vector_norm(np.diff(paths[reach], axis=0))  # (d-1, k)
-            eased = paths[reach][None] + weights[:, :, None, None] * shift[reach][None, :, None, :]
-            steps = vector_norm(np.diff(eased, axis=1))  # (R, d-1, k)
-            allowed = np.broadcast_to(np.maximum(own, limits)[None], steps.shape)
-            # (a point that never moves, in a clip held still, may not move at all: 0 / 0 fits)
-            ratio = np.divide(steps, allowed, out=np.where(steps > 0, np.inf, 0.0), where=allowed > 0)
-            worst = ratio.max(axis=(1, 2))
+    # Each side of each run (first: easing in, before it; last: easing out, after it), a block of sides at a time.
+    edges = np.asarray(runs, dtype=np.int64).reshape(-1)
+    directions = np.tile([-1, 1], len(runs))
+    for block in range(0, len(edges), _EASE_BLOCK):
+        cut = slice(block, block + _EASE_BLOCK)
+        reach = np.clip(edges[cut, None] + directions[cut, None] * distance, 0, frames - 1)  # (n, d)
+        near, moved = paths[reach], shift[reach]  # (n, d, k, 3), (n, d, 3)
+        allowed = np.maximum(vector_norm(np.diff(near, axis=1)), limits)  # (n, d-1, k)
+        # The shortest ease first, every side at once: most fit (a length's worst step is the same number
+        # whether it is worked out alone or with others); the others try every length.
+        shortest = _worst_steps(near, moved, weights[:1], allowed)[:, 0]
+        for index in range(len(reach)):
+            side = block + index
+            if shortest[index] <= 1.0 + 1e-9:
+                out.flat[side] = lengths[0]
+                continue
+            worst = _worst_steps(near[index][None], moved[index][None], weights, allowed[index][None])[0]
             fits = np.flatnonzero(worst <= 1.0 + 1e-9)
-            out[row, side] = lengths[fits[0]] if len(fits) else lengths[int(np.argmin(worst))]
+            out.flat[side] = lengths[fits[0]] if len(fits) else lengths[int(np.argmin(worst))]
     return out
+
+
+#: Run sides `ease_lengths` works out at once (its temporaries about 200 kB per hundred).
+_EASE_BLOCK = 256
+
+
+def _worst_steps(near: np.ndarray, moved: np.ndarray, weights: np.ndarray, allowed: np.ndarray) -> np.ndarray:
+    """For sides ``near (n, d, k, 3)`` of `ease_lengths` (the points beside a run) and each ease's weights
+    ``(R, d)``: the largest ratio ``(n, R)`` of a point's step on the eased path ``near + w moved``
+    (``moved (n, d, 3)``) to the step it is ``allowed (n, d-1, k)``."""
+    eased = near[:, None] + weights[None, :, :, None, None] * moved[:, None, :, None, :]  # (n, R, d, k, 3)
+    steps = vector_norm(np.diff(eased, axis=2))  # (n, R, d-1, k)
+    allowed = np.broadcast_to(allowed[:, None], steps.shape)
+    # (a point that never moves, in a clip held still, may not move at all: 0 / 0 fits)
+    ratio = np.divide(steps, allowed, out=np.where(steps > 0, np.inf, 0.0), where=allowed > 0)
+    return ratio.max(axis=(2, 3))
 
 
 def anchored_targets(captured: np.ndarray, current: np.ndarray, runs: np.ndarray, ground: Ground) -> np.ndarray:
