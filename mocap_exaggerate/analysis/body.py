@@ -28,7 +28,7 @@ import numpy as np
 from ..core.native import by_frame_halves
 from ..core.rotations import vector_norm
 
-__all__ = ["Capsule", "Part", "body_capsules", "limb_parts", "segment_closest", "captured_sides", "penetrations",
+__all__ = ["Capsule", "Part", "body_capsules", "limb_parts", "segment_closest", "CapturedSides", "penetrations",
            "inside_body"]
 
 
@@ -129,32 +129,39 @@ def segment_closest(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarr
     return s, t, gap
 
 
-def captured_sides(reference: np.ndarray, capsules: list[Capsule], parts: list[Part]) -> dict[tuple[str, int], np.ndarray]:
-    """Per (part, capsule index) the way (F, 3) from the capsule's axis to the part in ``reference`` (the
-    capture), for `penetrations`: it does not change while the output is pushed, so it is found once.
-    Each frame on its own: a long clip's two halves are made on two cores."""
-    return by_frame_halves(lambda frames: _captured_sides(reference[frames], capsules, parts), len(reference))
+class CapturedSides:
+    """The way (n, 3) from a capsule's axis to a part in ``reference (F, J, 3)`` (the capture), for
+    `penetrations`: it does not change while the output is pushed. Worked out only for the frames a
+    penetration test asks about (those where the part comes near the capsule), each as on the whole clip
+    (each frame's numbers its own: the same bits)."""
 
+    def __init__(self, reference: np.ndarray) -> None:
+        self.reference = reference
 
-def _captured_sides(reference: np.ndarray, capsules: list[Capsule], parts: list[Part]) -> dict:
-    out = {}
-    for part in parts:
-        for index, capsule in enumerate(capsules):
-            if capsule.name in part.avoid:
-                r0, r1 = capsule.ends(reference)
-                out[part.name, index] = segment_closest(reference[:, part.a], reference[:, part.b], r0, r1)[2]
-    return out
+    def __len__(self) -> int:
+        return len(self.reference)
+
+    def frames(self, frames: slice) -> CapturedSides:
+        """The sides of a run of the clip's frames (a half, on its own core)."""
+        return CapturedSides(self.reference[frames])
+
+    def side(self, part: Part, capsule: Capsule, rows: np.ndarray) -> np.ndarray:
+        """(len(rows), 3) the way from ``capsule``'s axis to ``part`` on the frames ``rows``."""
+        at = self.reference
+        r0, r1 = at[rows, capsule.a], at[rows, capsule.b]
+        r1 = r1 + capsule.extend * (r1 - r0)  # (`Capsule.ends`)
+        return segment_closest(at[rows, part.a], at[rows, part.b], r0, r1)[2]
 
 
 def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Part],
-                 reference: dict | None = None) -> dict[str, tuple]:
+                 reference: CapturedSides | None = None) -> dict[str, tuple]:
     """Per part, how deep it is in the body at each frame: ``(depth (F,), away (F, 3) unit, along (F,),
     trunk (F,) bool)``: the most any of its capsules' radius exceeds the distance between the axes (<= 0:
     outside; -inf where the part is clear of every capsule's bounding box, which is not measured), the way
     out from that capsule's axis at the closest point, where along the part (0 at its first joint), and
     whether that capsule is the torso, pelvis or head (0 and False where it is outside every capsule).
 
-    reference : the capture's `captured_sides`: where the part is near the capsule's
+    reference : the capture's `CapturedSides`: where the part is near the capsule's
         axis (within half its radius) the way out is then the side the captured part is on, so a part
         passing through the axis is not pushed one way and then the other; elsewhere its own shortest
         way (pushed back across the body to the captured side, a hand went round and round it).
@@ -162,16 +169,17 @@ def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Par
     Each frame on its own: a long clip's two halves are made on two cores.
     """
     def half(frames: slice) -> dict[str, tuple]:
-        sides = None if reference is None else {key: side[frames] for key, side in reference.items()}
+        sides = None if reference is None else reference.frames(frames)
         return _penetrations(positions[frames], capsules, parts, sides)
 
     return by_frame_halves(half, len(positions))
 
 
-def _penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Part], reference: dict | None) -> dict:
-    by_name: dict[str, list[tuple[int, Capsule]]] = {}
-    for index, capsule in enumerate(capsules):
-        by_name.setdefault(capsule.name, []).append((index, capsule))
+def _penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Part],
+                  reference: CapturedSides | None) -> dict:
+    by_name: dict[str, list[Capsule]] = {}
+    for capsule in capsules:
+        by_name.setdefault(capsule.name, []).append(capsule)
     out = {}
     frames = len(positions)
     for part in parts:
@@ -182,7 +190,7 @@ def _penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Pa
         p0, p1 = positions[:, part.a], positions[:, part.b]
         low, high = np.minimum(p0, p1), np.maximum(p0, p1)
         for name in part.avoid:
-            for index, capsule in by_name.get(name, ()):
+            for capsule in by_name.get(name, ()):
                 q0, q1 = capsule.ends(positions)
                 # Only the frames where the part may be within the radius of the axis: the gap between the
                 # two segments' boxes is at most their distance. (Elsewhere the part is outside this capsule,
@@ -200,7 +208,7 @@ def _penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Pa
                 across = np.cross(axis, np.eye(3)[np.argmin(np.abs(axis), axis=-1)])
                 gap = np.where((distance < 1e-12)[:, None], across, gap)
                 if reference is not None:
-                    side = reference[part.name, index][rows]
+                    side = reference.side(part, capsule, rows)
                     unit = axis / np.maximum(vector_norm(axis, keepdims=True), 1e-12)
                     side = side - np.sum(side * unit, axis=-1, keepdims=True) * unit
                     # (the captured side where the part is near the axis, its own way out where it is

@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..analysis.body import body_capsules, captured_sides, limb_parts, penetrations
+from ..analysis.body import CapturedSides, body_capsules, limb_parts, penetrations
 from ..analysis.limbs import behind_line
 from ..core.rotations import vector_norm
 from ..core.timing import end_ramp, gaussian_average, spread_max
@@ -60,7 +60,7 @@ class Body(NamedTuple):
 
     capsules, parts : the body's capsules and the moving parts (`mocap_exaggerate.analysis.body`)
     captured_depth : part -> (F,) how deep the captured part is (0 outside)
-    sides : `captured_sides`, the way from each capsule's axis to each captured part
+    sides : `CapturedSides`, the way from each capsule's axis to each captured part
     margin : how far past the surface a part is pushed (5 % of the thinnest capsule)
     limbs : the limbs with parts, in a fixed order (each one's push moves the next one's body)
     hips, root : the legs' base joints and where the capture has their middle (F, 3): a body moved
@@ -71,7 +71,7 @@ class Body(NamedTuple):
     capsules: list
     parts: list
     captured_depth: dict[str, np.ndarray]
-    sides: dict
+    sides: CapturedSides
     margin: float
     limbs: tuple[str, ...]
     hips: tuple[int, ...]
@@ -91,7 +91,7 @@ def prepare_body(limbs: dict, captured_pos: np.ndarray) -> Body | None:
               default=0.0)
     hips = tuple(int(joints[0]) for joints in legs)
     root = captured_pos[:, list(hips)].mean(axis=1) if hips else captured_pos[:, 0]
-    return Body(capsules, parts, depth, captured_sides(captured_pos, capsules, parts),
+    return Body(capsules, parts, depth, CapturedSides(captured_pos),
                 0.05 * min(capsule.radius for capsule in capsules), tuple(dict.fromkeys(p.limb for p in parts)),
                 hips, root, 0.1 * leg)
 
