@@ -180,6 +180,7 @@ def _penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Pa
     by_name: dict[str, list[Capsule]] = {}
     for capsule in capsules:
         by_name.setdefault(capsule.name, []).append(capsule)
+    boxes: dict[Capsule, tuple] = {}  # each capsule's axis and its box, made once for every part that avoids it
     out = {}
     frames = len(positions)
     for part in parts:
@@ -191,11 +192,14 @@ def _penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Pa
         low, high = np.minimum(p0, p1), np.maximum(p0, p1)
         for name in part.avoid:
             for capsule in by_name.get(name, ()):
-                q0, q1 = capsule.ends(positions)
+                if capsule not in boxes:
+                    q0, q1 = capsule.ends(positions)
+                    boxes[capsule] = q0, q1, np.minimum(q0, q1), np.maximum(q0, q1)
+                q0, q1, q_low, q_high = boxes[capsule]
                 # Only the frames where the part may be within the radius of the axis: the gap between the
                 # two segments' boxes is at most their distance. (Elsewhere the part is outside this capsule,
                 # and its depth, way out and place along it are what another capsule says, or none.)
-                box = np.maximum(np.maximum(np.minimum(q0, q1) - high, low - np.maximum(q0, q1)), 0.0)
+                box = np.maximum(np.maximum(q_low - high, low - q_high), 0.0)
                 rows = np.flatnonzero(np.einsum("fc,fc->f", box, box) < (capsule.radius * (1.0 + 1e-6)) ** 2)  # (slack
                 # for rounding: a frame measured needlessly costs nothing, one left out at tangency would)
                 if not len(rows):
