@@ -331,6 +331,60 @@ def test_both_formatters_write_a_whole_clip_alike(sample_clip):
     assert bvh.format_fixed(values) == bvh.format_fixed(values, compiled=False)
 
 
+@pytest.mark.parametrize("path", all_clip_params())
+def test_motion_lines_read_where_they_lie_are_the_tables_bytes(path):
+    """The writer's compiled path takes each channel from the block's positions and Euler angles
+    (`format_columns`); the NumPy path makes a table of channels and formats it: the same bytes on every
+    clip, written back and exaggerated (95 joints, six channels each), in blocks that cut the clip."""
+    from mocap_exaggerate.io import bvh
+    from mocap_exaggerate.pipeline import run
+
+    if bvh._compiled is None:
+        pytest.skip("the compiled formatter was not built")
+    motion, _ = read_bvh(path)
+    for clip in (motion, run(motion).motion):
+        for positions in ("standard", "input"):
+            ours = b"".join(bvh._motion_lines(clip, 97, positions))
+            assert ours == b"".join(bvh._motion_lines(clip, 97, positions, compiled=False))
+
+
+def test_motion_lines_past_the_compiled_formatters_reach_are_written_as_python_writes_them(sample_clip):
+    """A position of 1e9 or more (the compiled loop's limit) in one block: that block is formatted by
+    Python, as a table's would be; the others as before."""
+    from mocap_exaggerate.io import bvh
+
+    motion, _ = read_bvh(sample_clip)
+    far = motion.local_positions.copy()
+    far[120, 0, 1] = 2.5e10
+    moved = motion.replace(local_positions=far)
+    ours = b"".join(bvh._motion_lines(moved, 100))
+    assert ours == b"".join(bvh._motion_lines(moved, 100, compiled=False))
+    assert b" 25000000000.000000 " in ours
+
+
+def test_the_compiled_column_formatter_refuses_what_it_cannot_read():
+    from mocap_exaggerate.io import bvh
+
+    if bvh._compiled is None:
+        pytest.skip("the compiled formatter was not built")
+    table = np.zeros((4, 6))
+    picks = np.array([0, -1, 5], dtype=np.int64)
+    assert bvh._compiled.format_columns(table, table[:, :3].copy(), picks, 4, 6, 3, 6) == b"0.000000 0.000000 " \
+        b"0.000000\n" * 4
+    for args in [(table, table, np.array([6]), 4, 6, 6, 6),  # a pick past its table
+                 (table, table, np.array([-7]), 4, 6, 6, 6),
+                 (table, table, np.array([], dtype=np.int64), 4, 6, 6, 6),  # no columns
+                 (table, table, picks.astype(np.int32), 4, 6, 6, 6),  # not int64
+                 (table, table[:, :3], picks, 4, 6, 3, 6),  # not contiguous
+                 (table, table, picks, 5, 6, 6, 6),  # more rows than the tables hold
+                 (table, table, picks, 2**62, 6, 6, 6),
+                 (table.astype(np.float32), table, picks, 4, 6, 6, 6),
+                 (np.full((4, 6), np.nan), table, picks, 4, 6, 6, 6),
+                 (table, table, picks, 4, 6, 6, 10)]:
+        with pytest.raises((ValueError, BufferError)):
+            bvh._compiled.format_columns(*args)
+
+
 def test_a_file_cut_inside_the_hierarchy_says_so(tmp_path):
     """A clip cut in the middle of a word of its hierarchy named the word and no more (a new user's trial:
     `unexpected 'CHA' in joint 'LThumb'`): it says the file ends there. A fault elsewhere is named as it was."""

@@ -6,6 +6,11 @@
  * no minus sign on a zero, numbers separated by one space, rows by one LF, and a final LF.
  * Magnitudes of 1e9 or more are the caller's (io/bvh.py formats them in Python).
  *
+ * format_columns(first, second, picks, rows, first_width, second_width, decimals) -> bytes: the same text of
+ * rows whose columns are picked from two C-contiguous float64 tables (rows * first_width and rows *
+ * second_width): picks[c] >= 0 is first[r, picks[c]], else second[r, -1 - picks[c]] (the BVH's positions and
+ * Euler angles, formatted with no table of channels made between them).
+ *
  * parse_motion(block, out, channels, declared, largest) -> the number of lines with values, or -1.
  * block is bytes (the text after 'Frame Time:'), out a writable buffer of declared * channels float64.
  * Lines end at LF; values are separated by any of TAB LF VT FF CR SPACE. When the first `declared` lines
@@ -60,6 +65,36 @@ static int write_integer(char *out, uint64_t v) {
     return n;
 }
 
+/* One number: its separator (none before a row's first), sign, digits. 0 when it is not finite or is 1e9
+ * or more (the caller's job). */
+static inline int write_value(char **at_pointer, double v, int first, uint64_t scale, int decimals, double limit) {
+    char *at = *at_pointer;
+    double units = fabs(v) * (double)scale;
+    if (!(units < limit)) return 0; /* NaN, infinite or 1e9 or more */
+    /* Round half to even, as np.rint: below 2**52, adding and taking away 2**52 leaves the
+     * nearest integer (the default rounding mode); from 2**52 on every double is one. */
+    if (units < TWO_52) units = (units + TWO_52) - TWO_52;
+    uint64_t whole_units = (uint64_t)units;
+    if (!first) *at++ = ' ';
+    if (v < 0 && whole_units > 0) *at++ = '-';
+    at += write_integer(at, whole_units / scale);
+    if (decimals > 0) {
+        *at++ = '.';
+        uint64_t frac = whole_units % scale;
+        int i = decimals;
+        while (i >= 2) {
+            unsigned pair = (unsigned)(frac % 100);
+            frac /= 100;
+            at[--i] = DIGIT_PAIRS[2 * pair + 1];
+            at[--i] = DIGIT_PAIRS[2 * pair];
+        }
+        if (i == 1) at[0] = (char)('0' + frac);
+        at += decimals;
+    }
+    *at_pointer = at;
+    return 1;
+}
+
 static PyObject *format_fixed(PyObject *self, PyObject *args) {
     PyObject *values_object;
     Py_buffer view;
@@ -94,31 +129,9 @@ static PyObject *format_fixed(PyObject *self, PyObject *args) {
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t r = 0; r < rows && !bad; r++) {
         for (Py_ssize_t c = 0; c < cols; c++) {
-            double v = values[r * cols + c];
-            double units = fabs(v) * (double)scale;
-            if (!(units < limit)) { /* NaN, infinite or 1e9 or more: the caller's job */
+            if (!write_value(&at, values[r * cols + c], c == 0, scale, decimals, limit)) {
                 bad = 1;
                 break;
-            }
-            /* Round half to even, as np.rint: below 2**52, adding and taking away 2**52 leaves the
-             * nearest integer (the default rounding mode); from 2**52 on every double is one. */
-            if (units < TWO_52) units = (units + TWO_52) - TWO_52;
-            uint64_t whole_units = (uint64_t)units;
-            if (c > 0) *at++ = ' ';
-            if (v < 0 && whole_units > 0) *at++ = '-';
-            at += write_integer(at, whole_units / scale);
-            if (decimals > 0) {
-                *at++ = '.';
-                uint64_t frac = whole_units % scale;
-                int i = decimals;
-                while (i >= 2) {
-                    unsigned pair = (unsigned)(frac % 100);
-                    frac /= 100;
-                    at[--i] = DIGIT_PAIRS[2 * pair + 1];
-                    at[--i] = DIGIT_PAIRS[2 * pair];
-                }
-                if (i == 1) at[0] = (char)('0' + frac);
-                at += decimals;
             }
         }
         *at++ = '\n';
@@ -131,6 +144,92 @@ static PyObject *format_fixed(PyObject *self, PyObject *args) {
         return NULL;
     }
     if (_PyBytes_Resize(&result, at - out) < 0) return NULL;
+    return result;
+}
+
+/* A C-contiguous buffer of exactly `count` native items of `format` ("d" float64 or "q" int64). */
+static int get_items(PyObject *object, Py_buffer *view, const char *format, Py_ssize_t count, const char *name) {
+    if (PyObject_GetBuffer(object, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) return 0;
+    const Py_ssize_t size = format[0] == 'd' ? (Py_ssize_t)sizeof(double) : (Py_ssize_t)sizeof(int64_t);
+    int same = view->format != NULL && (strcmp(view->format, format) == 0 ||
+                                         (format[0] == 'q' && strcmp(view->format, "l") == 0 && sizeof(long) == 8));
+    if (!same || view->itemsize != size || count < 0 || count > PY_SSIZE_T_MAX / size || view->len != count * size) {
+        PyBuffer_Release(view);
+        PyErr_Format(PyExc_ValueError, "format_columns: %s must be C-contiguous native %s, %zd of them", name,
+                     format[0] == 'd' ? "float64" : "int64", count);
+        return 0;
+    }
+    return 1;
+}
+
+/* format_columns(first, second, picks, rows, first_width, second_width, decimals): format_fixed's bytes of
+ * the rows whose column c is first[r, picks[c]] where picks[c] >= 0, else second[r, -1 - picks[c]]: the
+ * BVH's channels taken from the positions and the Euler angles as they are, with no table made of them. */
+static PyObject *format_columns(PyObject *self, PyObject *args) {
+    PyObject *objects[3];
+    Py_ssize_t rows, widths[2];
+    int decimals;
+    if (!PyArg_ParseTuple(args, "OOOnnni", &objects[0], &objects[1], &objects[2], &rows, &widths[0], &widths[1],
+                          &decimals))
+        return NULL;
+    if (rows < 0 || widths[0] < 0 || widths[1] < 0 || decimals < 0 || decimals > 9 ||
+        (widths[0] > 0 && rows > PY_SSIZE_T_MAX / 8 / widths[0]) ||
+        (widths[1] > 0 && rows > PY_SSIZE_T_MAX / 8 / widths[1])) {
+        PyErr_SetString(PyExc_ValueError, "format_columns: counts out of range, or not 0 <= decimals <= 9");
+        return NULL;
+    }
+    Py_buffer views[3];
+    if (!get_items(objects[2], &views[2], "q", PyObject_Length(objects[2]), "picks")) return NULL;
+    const Py_ssize_t cols = views[2].len / (Py_ssize_t)sizeof(int64_t);
+    if (!get_items(objects[0], &views[0], "d", rows * widths[0], "first")) {
+        PyBuffer_Release(&views[2]);
+        return NULL;
+    }
+    if (!get_items(objects[1], &views[1], "d", rows * widths[1], "second")) {
+        PyBuffer_Release(&views[0]);
+        PyBuffer_Release(&views[2]);
+        return NULL;
+    }
+    const int64_t *picks = (const int64_t *)views[2].buf;
+    int fits = cols >= 1 && rows <= (PY_SSIZE_T_MAX - 1) / cols / 24;
+    for (Py_ssize_t c = 0; c < cols && fits; c++)
+        fits = picks[c] >= 0 ? picks[c] < widths[0] : -1 - picks[c] < widths[1];
+    PyObject *result = NULL;
+    if (!fits) {
+        PyErr_SetString(PyExc_ValueError, "format_columns: a pick outside its table, or no columns");
+    } else {
+        const Py_ssize_t widest = 13 + decimals; /* (as format_fixed's) */
+        result = PyBytes_FromStringAndSize(NULL, rows * cols * widest + 1);
+    }
+    if (result != NULL) {
+        char *out = PyBytes_AS_STRING(result);
+        char *at = out;
+        const double *first = (const double *)views[0].buf, *second = (const double *)views[1].buf;
+        uint64_t scale = 1;
+        for (int i = 0; i < decimals; i++) scale *= 10;
+        const double limit = 1e9 * (double)scale;
+        int bad = 0;
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t r = 0; r < rows && !bad; r++) {
+            const double *a = first + r * widths[0], *b = second + r * widths[1];
+            for (Py_ssize_t c = 0; c < cols; c++) {
+                const double v = picks[c] >= 0 ? a[picks[c]] : b[-1 - picks[c]];
+                if (!write_value(&at, v, c == 0, scale, decimals, limit)) {
+                    bad = 1;
+                    break;
+                }
+            }
+            *at++ = '\n';
+        }
+        Py_END_ALLOW_THREADS
+        if (bad) {
+            Py_CLEAR(result);
+            PyErr_SetString(PyExc_ValueError, "format_columns: a value is not finite, or is 1e9 or more");
+        } else if (_PyBytes_Resize(&result, at - out) < 0) {
+            result = NULL;
+        }
+    }
+    for (int i = 0; i < 3; i++) PyBuffer_Release(&views[i]);
     return result;
 }
 
@@ -271,6 +370,9 @@ static PyObject *parse_motion(PyObject *self, PyObject *args) {
 static PyMethodDef methods[] = {
     {"format_fixed", format_fixed, METH_VARARGS,
      "format_fixed(values, rows, cols, decimals) -> bytes: fixed-point rows of float64 numbers."},
+    {"format_columns", format_columns, METH_VARARGS,
+     "format_columns(first, second, picks, rows, first_width, second_width, decimals) -> bytes: format_fixed's "
+     "rows, each column taken from one of two tables."},
     {"parse_motion", parse_motion, METH_VARARGS,
      "parse_motion(block, out, channels, declared, largest) -> lines with values, or -1: BVH motion lines."},
     {NULL, NULL, 0, NULL},

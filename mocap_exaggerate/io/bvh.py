@@ -846,8 +846,44 @@ def iter_bvh(motion: Motion, *, positions: str = "standard"):
     if not (np.all(np.isfinite(motion.local_positions)) and np.all(np.isfinite(motion.local_rotations))):
         raise ValueError("motion has NaN or infinite values; refusing to write them")
     yield _format_header(motion).encode("utf-8")
-    for values in _channel_blocks(motion, _BLOCK_FRAMES, positions):
-        yield format_fixed(values)
+    yield from _motion_lines(motion, _BLOCK_FRAMES, positions)
+
+
+def _motion_lines(motion: Motion, block: int, positions: str = "standard", *, compiled: bool = True):
+    """The motion lines as consecutive pieces of bytes, a block of frames each: `format_fixed` of
+    `_channel_blocks`. Where the formatter is compiled, every rotation has one order and the positions are
+    written as they are, it reads each channel from the block's positions and Euler angles where they lie
+    (`format_columns`: no table of channels is made); the same bytes."""
+    skeleton = motion.skeleton
+    orders = {skeleton.rotation_order(j) for j in range(skeleton.num_joints)
+              if any(c in ROTATION_CHANNELS for c in skeleton.channels[j])}
+    if (not compiled or _compiled is None or len(orders) != 1
+            or written_positions(skeleton, positions) == "add"):
+        for values in _channel_blocks(motion, block, positions):
+            yield format_fixed(values, compiled=compiled)
+        return
+    order = orders.pop()
+    members = [j for j in range(skeleton.num_joints) if any(c in ROTATION_CHANNELS for c in skeleton.channels[j])]
+    column = {j: k for k, j in enumerate(members)}
+    # Each channel: where it lies in a frame's positions (j, axis), or -1 - where in its Euler angles.
+    picks = np.array([-1 - (3 * column[j] + order.index(name[0])) if name in ROTATION_CHANNELS
+                      else 3 * j + "XYZ".index(name[0])
+                      for j, names in enumerate(skeleton.channels) for name in names], dtype=np.int64)
+    angles = euler_blocks(motion.local_rotations, order, motion.euler_hint, block, columns=members)
+    frames, width = motion.num_frames, 3 * skeleton.num_joints
+    for start in range(0, frames, block):
+        part = slice(start, min(start + block, frames))
+        count = part.stop - part.start
+        euler = np.ascontiguousarray(next(angles), dtype=np.float64)
+        placed = np.ascontiguousarray(motion.local_positions[part], dtype=np.float64)
+        try:
+            yield _compiled.format_columns(placed, euler, picks, count, width, 3 * len(members), 6)
+        except ValueError:  # a number of 1e9 or more, or no channels: as `format_fixed` writes them
+            values = np.empty((count, len(picks)))
+            rotation = picks < 0
+            values[:, ~rotation] = placed.reshape(count, -1)[:, picks[~rotation]]
+            values[:, rotation] = euler.reshape(count, -1)[:, -1 - picks[rotation]]
+            yield format_fixed(values)
 
 
 def save_bvh(motion: Motion, path: str | os.PathLike | BinaryIO, *, overwrite: bool = True,
