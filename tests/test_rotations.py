@@ -172,3 +172,23 @@ def test_vector_norm_is_numpys_norm_bit_for_bit(length):
         assert vector_norm(v).tobytes() == np.linalg.norm(v, axis=-1).tobytes()
         assert vector_norm(v, keepdims=True).shape == np.linalg.norm(v, axis=-1, keepdims=True).shape
     assert vector_norm(np.array([[3, 4]])).tolist() == [5.0]  # integers: NumPy's norm
+
+
+def test_a_unit_track_is_unrolled_and_normalised_with_numpys_bits():
+    """The GLB's rotation tracks: the compiled pass gives `quat_unroll` and `vector_norm`'s division bit for
+    bit (unit and scaled quaternions, signs flipped at random, a track of one frame, a track whose
+    neighbours are at right angles: a dot of exactly zero does not flip)."""
+    from mocap_exaggerate.core.rotations import quat_unroll, unit_track, vector_norm
+
+    rng = np.random.default_rng(77)
+    q = rng.normal(size=(5000, 4)) * rng.uniform(0.5, 2.0, (5000, 1))
+    q[rng.random(5000) < 0.3] *= -1.0
+    square = np.array([[0.0, 0.0, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0]])
+    for track in (q, q[:1], square, q[:, [2, 0, 3, 1]].T.copy().T):
+        expected = quat_unroll(track, axis=0)
+        expected = expected / vector_norm(expected, keepdims=True)
+        assert np.array_equal(rotations.unit_track(track), expected)
+        assert np.array_equal(unit_track(track, compiled=False), expected)
+    ours = unit_track(q)
+    assert np.all(np.sum(ours[1:] * ours[:-1], axis=-1) >= 0)  # one hemisphere
+    assert np.allclose(vector_norm(ours), 1.0, atol=1e-15)

@@ -31,6 +31,9 @@
  *     frames: first (n, M, 3) float64 the first solutions, overwritten by the angles chosen; previous,
  *     turns and last (M, 3) float64 and parity (M,) int64 what the blocks before carried (read when
  *     started is 1), updated for the next. Only +, -, *, / and rint (NumPy's round), so NumPy's bits.
+ * unit_track(q, out, frames)
+ *     a quaternion track (F, 4) float64 as the GLB writes it: rotations.quat_unroll (each dot product summed
+ *     left to right, as np.sum sums four) and divided by vector_norm's length; NumPy's bits.
  * springs(follow, out, link_a, link_b, frames, particles, links, frame_time, substeps, stiffness, link_stiffness,
  *         damping)
  *     the suspended particles' time loop (stages/springs.py, `_integrate_vectorised`): follow and out
@@ -566,6 +569,42 @@ static PyObject *springs(PyObject *self, PyObject *args) {
     return finish(views, got, bad);
 }
 
+/* A track of quaternions (F, 4) as the GLB writes it: each sign flipped so neighbours lie in one hemisphere
+ * (rotations.quat_unroll: the parity of the captured neighbours' negative dot products so far, each dot
+ * summed left to right as NumPy's np.sum over four), then divided by its length (vector_norm's sums). */
+static PyObject *unit_track(PyObject *self, PyObject *args) {
+    PyObject *objects[2];
+    Py_ssize_t frames;
+    if (!PyArg_ParseTuple(args, "OOn", &objects[0], &objects[1], &frames)) return NULL;
+    if (!counts_fit(frames, 1, "unit_track")) return NULL;
+    Py_buffer views[2];
+    const Py_ssize_t counts[2] = {frames * 4, frames * 4};
+    const char *names[2] = {"q", "out"};
+    int got = get_arrays(objects, views, "dd", "rw", counts, names, 2);
+    int bad = got < 2;
+    if (!bad) {
+        const double *q = (const double *)views[0].buf;
+        double *out = (double *)views[1].buf;
+        Py_BEGIN_ALLOW_THREADS
+        int flipped = 0;
+        for (Py_ssize_t f = 0; f < frames; f++) {
+            const double *now = q + f * 4;
+            if (f > 0) {
+                const double *before = now - 4;
+                const double dot = ((now[0] * before[0] + now[1] * before[1]) + now[2] * before[2]) + now[3] * before[3];
+                if (dot < 0) flipped = !flipped;
+            }
+            double turned[4];
+            for (int k = 0; k < 4; k++) turned[k] = flipped ? -now[k] : now[k];
+            const double length = sqrt(((turned[0] * turned[0] + turned[1] * turned[1]) + turned[2] * turned[2]) +
+                                       turned[3] * turned[3]);
+            for (int k = 0; k < 4; k++) out[f * 4 + k] = turned[k] / length;
+        }
+        Py_END_ALLOW_THREADS
+    }
+    return finish(views, got, bad);
+}
+
 static PyMethodDef methods[] = {
     {"local_from_world", local_from_world, METH_VARARGS,
      "local_from_world(parents, world_rot, world_pos, local_rot, local_pos, frames, joints): world to local."},
@@ -579,6 +618,8 @@ static PyMethodDef methods[] = {
      "quat_from_euler(euler, out, codes, frames, joints): intrinsic Euler angles in degrees to quaternions."},
     {"euler_continuity", euler_continuity, METH_VARARGS,
      "euler_continuity(first, previous, parity, turns, last, frames, width, started): Euler angles made continuous."},
+    {"unit_track", unit_track, METH_VARARGS,
+     "unit_track(q, out, frames): a quaternion track unrolled into one hemisphere and of unit length."},
     {"springs", springs, METH_VARARGS,
      "springs(follow, out, link_a, link_b, frames, particles, links, frame_time, substeps, stiffness, "
      "link_stiffness, damping): the suspended particles' time loop."},

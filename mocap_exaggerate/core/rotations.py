@@ -40,6 +40,7 @@ __all__ = [
     "quat_to_matrix",
     "quat_from_matrix",
     "quat_unroll",
+    "unit_track",
     "cross",
     "vector_norm",
 ]
@@ -606,6 +607,19 @@ def _solve_first_angle(q: np.ndarray, second: np.ndarray, third: np.ndarray, ord
 def _wrap_near(angles: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """Add whole turns to ``angles`` to bring each nearest to ``reference``."""
     return angles + 360.0 * np.round((reference - angles) / 360.0)
+
+
+def unit_track(q: np.ndarray, *, compiled: bool = True) -> np.ndarray:
+    """A track of quaternions ``(F, 4)`` as an animation keys it: `quat_unroll` along time (no sign flip
+    between neighbours: a player interpolating them takes the short way) and each of unit length; one
+    pass of ``core/_kernels.c`` where it was built, NumPy's bits."""
+    q = np.asarray(q, dtype=np.float64)
+    if compiled and _kernels is not None and q.ndim == 2 and q.shape[1] == 4:
+        out = np.empty(q.shape)
+        _kernels.unit_track(np.ascontiguousarray(q), out, len(q))
+        return out
+    q = quat_unroll(q, axis=0)
+    return q / vector_norm(q, keepdims=True)
 
 
 def quat_unroll(q: np.ndarray, axis: int = 0) -> np.ndarray:

@@ -20,7 +20,7 @@ import pygltflib as gl
 
 from ..core.errors import ConfigError
 from ..core.motion import Motion
-from ..core.rotations import quat_mul, quat_rotate, quat_unroll, vector_norm
+from ..core.rotations import quat_mul, quat_rotate, unit_track
 from ..rig.skinning import Skin
 from .units import UNITS, guessed_units_warning, unit_scale
 
@@ -249,8 +249,7 @@ def glb_pieces(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
         if j == 0 and turned:
             rotation = quat_mul(upright, rotation)
             translation = translation @ turn.T
-        rotation = quat_unroll(rotation, axis=0)
-        rotation = (rotation / vector_norm(rotation, keepdims=True)).astype(np.float32)
+        rotation = unit_track(rotation).astype(np.float32)
         node_scale = None
         if thickness is not None:  # joint by joint too: no (F, J) arrays beside the thickness
             parent_world = thickness[:, skeleton.parents[j]] if j > 0 else np.ones(motion.num_frames)
