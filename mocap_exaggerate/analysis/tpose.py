@@ -58,8 +58,11 @@ def detect_rest_frames(motion: Motion, world_positions: np.ndarray | None = None
         turned = np.degrees(quat_angle(rot[0, 1:], identity))
         if turned.size and turned.max() > REST_POSE_MAX_ANGLE:
             return 0
-    pose = world - world[:, :1]
     # Median over joints: a handful of wobbling fingers should not decide it.
+    first_jump = float(np.median(vector_norm((world[1] - world[1, :1]) - (world[0] - world[0, :1]))))
+    if not teleport[0] and not first_jump > 0.01 * height:  # (below any limit: the clip's medians are not needed)
+        return 0
+    pose = world - world[:, :1]
     jump = np.median(vector_norm(pose[1:] - pose[:-1]), axis=1)
     typical = float(np.median(jump))
     limit = max(JUMP_FACTOR * typical, 0.01 * height)
