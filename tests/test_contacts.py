@@ -562,3 +562,25 @@ def test_a_slow_walk_stepping_higher_keeps_its_planted_foot():
         captured = motion.world_positions()[first:last + 1, joint]
         assert np.abs(written - captured).max() < 0.01 * motion.skeleton.height(), name
 
+
+
+def test_an_effectors_points_on_some_frames_are_those_frames_of_all(monkeypatch):
+    """The floor's lift works out a foot's toes only on the frames its reach brings near the floor
+    (`_effector_points` with ``rows``): each frame's points are the ones worked out on every frame, bit for
+    bit (planted or not), on the shipped clips at looney (toes that ride the feet, frames left out)."""
+    from mocap_exaggerate.stages import contacts
+
+    real, calls = contacts._effector_points, []
+
+    def checked(out, hierarchy, skeleton, effector, captured_pos, captured_rot, pin, rows=slice(None)):
+        some = real(out, hierarchy, skeleton, effector, captured_pos, captured_rot, pin, rows)
+        every = real(out, hierarchy, skeleton, effector, captured_pos, captured_rot, pin)
+        assert np.array_equal(some, every[rows])
+        calls.append((every, np.setdiff1d(np.arange(len(every)), np.arange(len(every))[rows]), pin is not None))
+        return some
+
+    monkeypatch.setattr(contacts, "_effector_points", checked)
+    for clip in sorted(SAMPLE_DIR.glob("*.bvh")):
+        run(read_bvh(clip)[0], load_preset("looney"))
+    riders = [(every, left) for every, left, _ in calls if every.shape[1] > 1]
+    assert riders and any(len(left) for _, left in riders) and any(planted for *_, planted in calls)

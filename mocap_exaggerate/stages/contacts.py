@@ -843,12 +843,20 @@ def constrain(
         up = ground.up()
         margin = 0.005 * ground.height
         for joint, effector in effectors.items():
+            # A rider is never further from the end than in the capture: only the frames where the end comes
+            # within that reach of the floor can have a point under it (elsewhere the lift is 0).
+            riders = list(effector.points[1:])
+            reach = (vector_norm(captured_pos[:, riders] - captured_pos[:, joint:joint + 1]).max(axis=1) if riders
+                     else np.zeros(frames)) * (1.0 + 1e-9) + 1e-9 * ground.height
             # Lifting the end turns it (its incoming link moves), which moves its toes: a few rounds.
             for _ in range(4):
-                points = _effector_points(out, hierarchy, skeleton, effector, captured_pos, captured_rot,
-                                          pins.get(joint))
-                lowest = ground.heights(points).min(axis=1)
-                lift = soft_floor(lowest, ground.floor, margin) - lowest
+                rows = np.flatnonzero(ground.heights(out[:, original[joint]]) - reach < ground.floor)
+                lift = np.zeros(frames)
+                if len(rows):
+                    points = _effector_points(out, hierarchy, skeleton, effector, captured_pos, captured_rot,
+                                              pins.get(joint), rows)
+                    lowest = ground.heights(points).min(axis=1)
+                    lift[rows] = soft_floor(lowest, ground.floor, margin) - lowest
                 if not np.any(lift > 1e-6 * ground.height):
                     break
                 lift = _spread_lift(lift, ramp, pins.get(joint))
@@ -859,14 +867,18 @@ def constrain(
         """Lift every moving point off the floor (the feet held where they are planted)."""
         margin = 0.005 * ground.height
         moving = np.flatnonzero(~hierarchy.rigid[hierarchy.link_child])
-        heights = ground.heights(out[:, moving])
-        held = np.zeros(heights.shape)
+        heights = ground.sign * out[:, moving, ground.axis]  # (`Ground.heights`, of the up axis alone)
+        # Only the points that come under the floor are lifted (the others' lift is 0, spread or not).
+        low = np.flatnonzero(np.any(heights < ground.floor, axis=0))
+        below = heights[:, low]
+        lift = soft_floor(below, ground.floor, margin) - below
+        lifted = np.any(lift != 0.0, axis=0)
+        low, below, lift = low[lifted], below[:, lifted], lift[:, lifted]
+        held = np.zeros(lift.shape)
         for joint, weight in pins.items():
-            held[:, np.isin(hierarchy.link_child[moving], effectors[joint].chain[-1:])] = weight[:, None]
-        lift = soft_floor(heights, ground.floor, margin) - heights
-        low = np.flatnonzero(np.any(lift != 0.0, axis=0))  # the points that come near the floor at all
-        lift[:, low] = _spread_lift(lift[:, low], ramp, held[:, low])  # (the others' stays 0, spread or not)
-        out[:, moving, ground.axis] = ground.sign * (heights + lift)
+            held[:, np.isin(hierarchy.link_child[moving[low]], effectors[joint].chain[-1:])] = weight[:, None]
+        lift = _spread_lift(lift, ramp, held)
+        out[:, moving[low], ground.axis] = ground.sign * (below + lift)
 
     body: dict[str, dict[str, int]] = {}
     floor = config.enabled and config.floor
@@ -961,23 +973,25 @@ def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, 
     out[frames, chain[2]] = goal[frames]
 
 
-def _effector_points(out, hierarchy, skeleton, effector: Effector, captured_pos, captured_rot, pin) -> np.ndarray:
-    """Where the effector's joint and riders will be ``(F, P, 3)``, turned as orientation recovery will turn it
-    (by the link into it, `incoming_joint`)."""
+def _effector_points(out, hierarchy, skeleton, effector: Effector, captured_pos, captured_rot, pin,
+                     rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+    """Where the effector's joint and riders will be ``(F, P, 3)`` on the frames ``rows`` (each frame's
+    numbers its own), turned as orientation recovery will turn it (by the link into it, `incoming_joint`)."""
     joint = effector.joint
-    position = out[:, hierarchy.original[joint]]
+    position = out[rows, hierarchy.original[joint]]
     if len(effector.points) == 1:
         return position[:, None]
     above = incoming_joint(skeleton, joint)
-    rotation = captured_rot[:, joint]
+    turned = captured_rot[rows, joint]
+    rotation = turned
     if above >= 0:
-        turn = quat_between(captured_pos[:, joint] - captured_pos[:, above],
-                            position - out[:, hierarchy.original[above]])
+        turn = quat_between(captured_pos[rows, joint] - captured_pos[rows, above],
+                            position - out[rows, hierarchy.original[above]])
         rotation = quat_mul(turn, rotation)
     if pin is not None:
-        rotation = quat_slerp(rotation, captured_rot[:, joint], pin)
+        rotation = quat_slerp(rotation, turned, pin[rows])
     riders = list(effector.points[1:])
-    local = quat_rotate(quat_inv(captured_rot[:, joint])[:, None], captured_pos[:, riders] - captured_pos[:, joint:joint + 1])
+    local = quat_rotate(quat_inv(turned)[:, None], captured_pos[:, riders][rows] - captured_pos[rows, joint][:, None])
     return np.concatenate([position[:, None], position[:, None] + quat_rotate(rotation[:, None], local)], axis=1)
 
 
