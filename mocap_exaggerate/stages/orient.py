@@ -193,10 +193,12 @@ def recover_orientations(
     if rubber is hierarchy:
         positions = sub_pos
     else:
-        positions = np.empty((frames, rubber.skeleton.num_joints, 3))
+        # Each written joint's column of sub_pos (a start joint: its link's parent's), gathered at once.
         starts = rubber.fraction == 0.0
-        positions[:, ~starts] = sub_pos
-        positions[:, starts] = positions[:, rubber.original[rubber.link_parent[starts]]]
+        column = np.empty(rubber.skeleton.num_joints, dtype=np.int64)
+        column[~starts] = np.arange(sub_pos.shape[1])
+        column[starts] = column[rubber.original[rubber.link_parent[starts]]]
+        positions = np.take(sub_pos, column, axis=1)
     del sub_pos, new_pos  # (a long clip's copies, not needed past here)
     return curve_frames(world, positions, rubber), positions
 
