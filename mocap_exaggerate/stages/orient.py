@@ -294,26 +294,31 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
         on_both_cores(lambda part: _kernels.chain_frames(
             out[part], positions[part], heads, firsts, counts, direction, part.stop - part.start, out.shape[1],
             len(starts)), frame_halves(len(out)))
-    for part in cache_blocks(len(out), len(starts)):
-        if kernel:
-            frame = out[part, starts + cuts - 1]
-        else:
-            frame = out[part, head]
-            for on, joint in steps:
-                along = positions[part, joint + 1] - positions[part, joint]
-                frame[:, on] = quat_normalize(quat_mul(quat_between(quat_rotate(frame[:, on], direction[on]), along),
-                                                       frame[:, on]))
-                out[part, joint] = frame[:, on]
-        # Their turn relative to the carried frame, split into a swing and a twist about the last sub-link.
-        last = positions[part, end] - positions[part, starts + cuts - 1]
-        axis = last / np.maximum(vector_norm(last, keepdims=True), 1e-300)
-        gap = quat_mul(out[part, ends], quat_inv(frame))
-        sign = np.where(gap[..., 3] < 0.0, -1.0, 1.0)  # q and -q are one turn: take the one within half a turn
-        twisted = 2.0 * np.arctan2(sign * np.sum(gap[..., :3] * axis, axis=-1), np.abs(gap[..., 3]))
-        pointing = quat_rotate(gap, axis)
-        fold = np.sum(pointing * axis, axis=-1) / np.maximum(vector_norm(pointing), 1e-300)
-        angle[part] = twisted * (smootherstep((fold - _FOLDED) / (_UNFOLDED - _FOLDED))
-                                 * smootherstep((np.pi - np.abs(twisted)) / (np.pi - _TWIST_FADE)))
+
+    def carried(rows: slice) -> None:  # each frame on its own: a long clip's halves on two cores
+        for block in cache_blocks(rows.stop - rows.start, len(starts)):
+            part = slice(rows.start + block.start, rows.start + block.stop)
+            if kernel:
+                frame = out[part, starts + cuts - 1]
+            else:
+                frame = out[part, head]
+                for on, joint in steps:
+                    along = positions[part, joint + 1] - positions[part, joint]
+                    frame[:, on] = quat_normalize(quat_mul(quat_between(quat_rotate(frame[:, on], direction[on]),
+                                                                        along), frame[:, on]))
+                    out[part, joint] = frame[:, on]
+            # Their turn relative to the carried frame, split into a swing and a twist about the last sub-link.
+            last = positions[part, end] - positions[part, starts + cuts - 1]
+            axis = last / np.maximum(vector_norm(last, keepdims=True), 1e-300)
+            gap = quat_mul(out[part, ends], quat_inv(frame))
+            sign = np.where(gap[..., 3] < 0.0, -1.0, 1.0)  # q and -q are one turn: take the one within half a turn
+            twisted = 2.0 * np.arctan2(sign * np.sum(gap[..., :3] * axis, axis=-1), np.abs(gap[..., 3]))
+            pointing = quat_rotate(gap, axis)
+            fold = np.sum(pointing * axis, axis=-1) / np.maximum(vector_norm(pointing), 1e-300)
+            angle[part] = twisted * (smootherstep((fold - _FOLDED) / (_UNFOLDED - _FOLDED))
+                                     * smootherstep((np.pi - np.abs(twisted)) / (np.pi - _TWIST_FADE)))
+
+    on_both_cores(carried, frame_halves(len(out)))
     angle = gaussian_average(angle, 1.0, ends="nearest")  # where the fades pass quickly, over a few frames
     if kernel:
         angle = np.ascontiguousarray(angle)
