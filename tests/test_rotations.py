@@ -189,6 +189,10 @@ def test_a_unit_track_is_unrolled_and_normalised_with_numpys_bits():
         expected = expected / vector_norm(expected, keepdims=True)
         assert np.array_equal(rotations.unit_track(track), expected)
         assert np.array_equal(unit_track(track, compiled=False), expected)
+    joints = q[:4998].reshape(1666, 3, 4)  # a joint's track read where it lies in a clip's (F, J, 4)
+    for joint in range(3):
+        assert np.array_equal(unit_track(joints, joint), unit_track(joints[:, joint].copy(), compiled=False))
+        assert np.array_equal(unit_track(joints, joint, compiled=False), unit_track(joints[:, joint].copy()))
     ours = unit_track(q)
     assert np.all(np.sum(ours[1:] * ours[:-1], axis=-1) >= 0)  # one hemisphere
     assert np.allclose(vector_norm(ours), 1.0, atol=1e-15)

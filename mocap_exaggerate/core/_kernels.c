@@ -31,8 +31,8 @@
  *     frames: first (n, M, 3) float64 the first solutions, overwritten by the angles chosen; previous,
  *     turns and last (M, 3) float64 and parity (M,) int64 what the blocks before carried (read when
  *     started is 1), updated for the next. Only +, -, *, / and rint (NumPy's round), so NumPy's bits.
- * unit_track(q, out, frames)
- *     a quaternion track (F, 4) float64 as the GLB writes it: rotations.quat_unroll (each dot product summed
+ * unit_track(q, out, frames, joints, joint)
+ *     joint's track of quaternions q (F, joints, 4) float64, into out (F, 4), as the GLB writes it: rotations.quat_unroll (each dot product summed
  *     left to right, as np.sum sums four) and divided by vector_norm's length; NumPy's bits.
  * springs(follow, out, link_a, link_b, frames, particles, links, frame_time, substeps, stiffness, link_stiffness,
  *         damping)
@@ -574,23 +574,27 @@ static PyObject *springs(PyObject *self, PyObject *args) {
  * summed left to right as NumPy's np.sum over four), then divided by its length (vector_norm's sums). */
 static PyObject *unit_track(PyObject *self, PyObject *args) {
     PyObject *objects[2];
-    Py_ssize_t frames;
-    if (!PyArg_ParseTuple(args, "OOn", &objects[0], &objects[1], &frames)) return NULL;
-    if (!counts_fit(frames, 1, "unit_track")) return NULL;
+    Py_ssize_t frames, joints, joint;
+    if (!PyArg_ParseTuple(args, "OOnnn", &objects[0], &objects[1], &frames, &joints, &joint)) return NULL;
+    if (!counts_fit(frames, joints, "unit_track")) return NULL;
+    if (joint < 0 || joint >= joints) {
+        PyErr_SetString(PyExc_ValueError, "unit_track: the joint is not one of the joints");
+        return NULL;
+    }
     Py_buffer views[2];
-    const Py_ssize_t counts[2] = {frames * 4, frames * 4};
+    const Py_ssize_t counts[2] = {frames * joints * 4, frames * 4};
     const char *names[2] = {"q", "out"};
     int got = get_arrays(objects, views, "dd", "rw", counts, names, 2);
     int bad = got < 2;
     if (!bad) {
-        const double *q = (const double *)views[0].buf;
+        const double *q = (const double *)views[0].buf + joint * 4;
         double *out = (double *)views[1].buf;
         Py_BEGIN_ALLOW_THREADS
         int flipped = 0;
         for (Py_ssize_t f = 0; f < frames; f++) {
-            const double *now = q + f * 4;
+            const double *now = q + f * joints * 4;
             if (f > 0) {
-                const double *before = now - 4;
+                const double *before = now - joints * 4;
                 const double dot = ((now[0] * before[0] + now[1] * before[1]) + now[2] * before[2]) + now[3] * before[3];
                 if (dot < 0) flipped = !flipped;
             }
@@ -619,7 +623,8 @@ static PyMethodDef methods[] = {
     {"euler_continuity", euler_continuity, METH_VARARGS,
      "euler_continuity(first, previous, parity, turns, last, frames, width, started): Euler angles made continuous."},
     {"unit_track", unit_track, METH_VARARGS,
-     "unit_track(q, out, frames): a quaternion track unrolled into one hemisphere and of unit length."},
+     "unit_track(q, out, frames, joints, joint): a joint's quaternion track unrolled into one hemisphere and of "
+     "unit length."},
     {"springs", springs, METH_VARARGS,
      "springs(follow, out, link_a, link_b, frames, particles, links, frame_time, substeps, stiffness, "
      "link_stiffness, damping): the suspended particles' time loop."},

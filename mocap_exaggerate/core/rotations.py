@@ -609,16 +609,20 @@ def _wrap_near(angles: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return angles + 360.0 * np.round((reference - angles) / 360.0)
 
 
-def unit_track(q: np.ndarray, *, compiled: bool = True) -> np.ndarray:
+def unit_track(q: np.ndarray, joint: int | None = None, *, compiled: bool = True) -> np.ndarray:
     """A track of quaternions ``(F, 4)`` as an animation keys it: `quat_unroll` along time (no sign flip
     between neighbours: a player interpolating them takes the short way) and each of unit length; one
-    pass of ``core/_kernels.c`` where it was built, NumPy's bits."""
+    pass of ``core/_kernels.c`` where it was built, NumPy's bits. With ``joint``: that joint's track of
+    ``q (F, J, 4)`` (read where it lies, not copied out first)."""
     q = np.asarray(q, dtype=np.float64)
-    if compiled and _kernels is not None and q.ndim == 2 and q.shape[1] == 4:
-        out = np.empty(q.shape)
-        _kernels.unit_track(np.ascontiguousarray(q), out, len(q))
+    if joint is None:
+        q = q[:, None]
+        joint = 0
+    if compiled and _kernels is not None and q.ndim == 3 and q.shape[2] == 4:
+        out = np.empty((len(q), 4))
+        _kernels.unit_track(np.ascontiguousarray(q), out, len(q), q.shape[1], int(joint))
         return out
-    q = quat_unroll(q, axis=0)
+    q = quat_unroll(q[:, joint], axis=0)
     return q / vector_norm(q, keepdims=True)
 
 

@@ -242,14 +242,15 @@ def glb_pieces(motion: Motion, skin: Skin, *, meters_per_unit: float = 1.0, name
     if thickness is not None:
         thickness = np.asarray(thickness, dtype=np.float64)
     samplers, channels = [], []
+    rotations = np.ascontiguousarray(motion.local_rotations, dtype=np.float64)  # (each joint's track read where it lies)
     for j in range(skeleton.num_joints):
         # Joint by joint: float32 tracks made one at a time keep long clips' memory flat.
-        rotation = motion.local_rotations[:, j]
         translation = motion.local_positions[:, j] * scale
         if j == 0 and turned:
-            rotation = quat_mul(upright, rotation)
+            rotation = unit_track(quat_mul(upright, rotations[:, j])).astype(np.float32)
             translation = translation @ turn.T
-        rotation = unit_track(rotation).astype(np.float32)
+        else:
+            rotation = unit_track(rotations, j).astype(np.float32)
         node_scale = None
         if thickness is not None:  # joint by joint too: no (F, J) arrays beside the thickness
             parent_world = thickness[:, skeleton.parents[j]] if j > 0 else np.ones(motion.num_frames)
