@@ -306,3 +306,28 @@ def test_a_looney_jump_keeps_its_upper_arm_at_half_its_length_or_more():
 
     assert shortest(0.0) < 0.3  # the paper's correction only shortens
     assert 0.5 < shortest(0.5) < 0.55  # the preset's floor (0.5 is the default)
+
+
+def test_positions_rebuilt_from_their_links_by_the_kernel_are_the_loops():
+    """`_rebuild` down a branching hierarchy: the compiled pass gives the joint-by-joint NumPy loop's bits
+    (links scaled, a zero-length link kept), and a hierarchy whose parent comes after its child is refused."""
+    from mocap_exaggerate.core.native import kernels
+    from mocap_exaggerate.stages.correct import _rebuild
+
+    rng = np.random.default_rng(11)
+    parents = np.array([-1, 0, 1, 2, 1, 4, 0, 6, 7])
+    pos = rng.normal(size=(300, len(parents), 3))
+    vec = pos[:, 1:] - pos[:, parents[1:]]
+    vec[:, 2] = 0.0
+    length = np.linalg.norm(vec, axis=-1)
+    new_length = length * rng.uniform(0.5, 1.5, length.shape)
+    ours = _rebuild(pos.copy(), parents, vec, length, new_length)
+    theirs = _rebuild(pos.copy(), parents, vec, length, new_length, compiled=False)
+    assert np.array_equal(ours, theirs)
+    assert np.allclose(np.linalg.norm(ours[:, 1:] - ours[:, parents[1:]], axis=-1)[:, [0, 1, 3]],
+                       new_length[:, [0, 1, 3]])
+    if kernels is not None:
+        with pytest.raises(ValueError, match="parents"):
+            kernels.chain_add(pos.copy(), np.array([-1, 2, 0, 1, 1, 4, 0, 6, 7]), np.ascontiguousarray(vec), 300, 9)
+        with pytest.raises(ValueError):
+            kernels.chain_add(pos.copy(), parents, np.ascontiguousarray(vec[:-1]), 300, 9)

@@ -31,6 +31,9 @@
  *     frames: first (n, M, 3) float64 the first solutions, overwritten by the angles chosen; previous,
  *     turns and last (M, 3) float64 and parity (M,) int64 what the blocks before carried (read when
  *     started is 1), updated for the next. Only +, -, *, / and rint (NumPy's round), so NumPy's bits.
+ * chain_add(pos, parents, links, frames, joints)
+ *     pos (F, J, 3) float64 rebuilt in place down the hierarchy from links (F, J-1, 3): each joint its parent's
+ *     position plus its link (correct._rebuild; one add each, NumPy's bits).
  * unit_track(q, out, frames, joints, joint)
  *     joint's track of quaternions q (F, joints, 4) float64, into out (F, 4), as the GLB writes it: rotations.quat_unroll (each dot product summed
  *     left to right, as np.sum sums four) and divided by vector_norm's length; NumPy's bits.
@@ -569,6 +572,39 @@ static PyObject *springs(PyObject *self, PyObject *args) {
     return finish(views, got, bad);
 }
 
+/* Positions rebuilt down a hierarchy from their links: pos[f, j] = pos[f, parents[j]] + links[f, j - 1] for every
+ * joint after the root, parents first (correct._rebuild's loop: one add per number, NumPy's bits). */
+static PyObject *chain_add(PyObject *self, PyObject *args) {
+    PyObject *objects[3];
+    Py_ssize_t frames, joints;
+    if (!PyArg_ParseTuple(args, "OOOnn", &objects[0], &objects[1], &objects[2], &frames, &joints)) return NULL;
+    if (!counts_fit(frames, joints, "chain_add")) return NULL;
+    Py_buffer views[3];
+    const Py_ssize_t counts[3] = {frames * joints * 3, joints, frames * (joints - 1) * 3};
+    const char *names[3] = {"pos", "parents", "links"};
+    int got = get_arrays(objects, views, "dqd", "wrr", counts, names, 3);
+    int bad = got < 3;
+    const int64_t *parents = bad ? NULL : (const int64_t *)views[1].buf;
+    if (!bad) bad = !parents_in_order(parents, joints, "chain_add");
+    if (!bad) {
+        double *pos = (double *)views[0].buf;
+        const double *links = (const double *)views[2].buf;
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t f = 0; f < frames; f++) {
+            double *at = pos + f * joints * 3;
+            const double *link = links + f * (joints - 1) * 3;
+            for (Py_ssize_t j = 1; j < joints; j++) {
+                const double *parent = at + parents[j] * 3;
+                at[j * 3] = parent[0] + link[(j - 1) * 3];
+                at[j * 3 + 1] = parent[1] + link[(j - 1) * 3 + 1];
+                at[j * 3 + 2] = parent[2] + link[(j - 1) * 3 + 2];
+            }
+        }
+        Py_END_ALLOW_THREADS
+    }
+    return finish(views, got, bad);
+}
+
 /* A track of quaternions (F, 4) as the GLB writes it: each sign flipped so neighbours lie in one hemisphere
  * (rotations.quat_unroll: the parity of the captured neighbours' negative dot products so far, each dot
  * summed left to right as NumPy's np.sum over four), then divided by its length (vector_norm's sums). */
@@ -622,6 +658,8 @@ static PyMethodDef methods[] = {
      "quat_from_euler(euler, out, codes, frames, joints): intrinsic Euler angles in degrees to quaternions."},
     {"euler_continuity", euler_continuity, METH_VARARGS,
      "euler_continuity(first, previous, parity, turns, last, frames, width, started): Euler angles made continuous."},
+    {"chain_add", chain_add, METH_VARARGS,
+     "chain_add(pos, parents, links, frames, joints): positions rebuilt down the hierarchy from their links."},
     {"unit_track", unit_track, METH_VARARGS,
      "unit_track(q, out, frames, joints, joint): a joint's quaternion track unrolled into one hemisphere and of "
      "unit length."},

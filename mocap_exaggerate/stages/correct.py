@@ -55,6 +55,7 @@ import numpy as np
 from ..analysis.limbs import limb_hinges
 from ..core.errors import ConfigError, check_flag, check_number
 from ..core.kinematics import cache_blocks
+from ..core.native import kernels as _kernels  # the compiled loops, where built (core/native.py)
 from ..core.rotations import vector_norm
 from ..core.settings import Flag, setting
 from ..core.timing import check_duration, parse_duration, smootherstep, soft_limit, spread_max
@@ -290,10 +291,16 @@ def correct(
 
 
 def _rebuild(pos: np.ndarray, parents: np.ndarray, vec: np.ndarray, length: np.ndarray,
-             new_length: np.ndarray) -> np.ndarray:
-    """Positions with every link ``vec`` (F, J-1, 3) scaled to ``new_length``, children carrying their subtree."""
+             new_length: np.ndarray, *, compiled: bool = True) -> np.ndarray:
+    """Positions with every link ``vec`` (F, J-1, 3) scaled to ``new_length``, children carrying their subtree
+    (in place on ``pos``; ``compiled``: by ``core/_kernels.c`` where it was built, the same bits)."""
     scale = np.divide(new_length, length, out=np.ones_like(length), where=length > 0)
     links = vec * scale[..., None]
+    if (compiled and _kernels is not None and pos.dtype == np.float64 and pos.flags.c_contiguous and pos.ndim == 3
+            and len(parents) > 1 and links.shape == (len(pos), len(parents) - 1, 3)):
+        _kernels.chain_add(pos, np.ascontiguousarray(parents, dtype=np.int64), np.ascontiguousarray(links), len(pos),
+                           len(parents))  # (the loop below, a frame at a time in C: the same bits)
+        return pos
     for j in range(1, len(parents)):
         pos[:, j] = pos[:, parents[j]] + links[:, j - 1]
     return pos
