@@ -307,7 +307,10 @@ def test_a_reserved_file_keeps_its_place_in_the_renames_and_may_be_written_on_an
     from mocap_exaggerate.io import files
 
     order, real = [], os.replace
-    with OutputSet(overwrite=True) as written, ThreadPoolExecutor(max_workers=1) as pool:
+    pool = ThreadPoolExecutor(max_workers=1)
+    pool.submit(int).result()  # (the pool's thread started before the count: it is not the set's)
+    before = _open_descriptors()
+    with OutputSet(overwrite=True) as written, pool:
         glb = written.reserve(tmp_path / "clip.glb")
         unused = written.reserve(tmp_path / "clip.usdc")
         digest = pool.submit(glb, [b"gl", b"TF"])
@@ -319,14 +322,44 @@ def test_a_reserved_file_keeps_its_place_in_the_renames_and_may_be_written_on_an
         written.commit(late=[tmp_path / "clip.bvh"])
     assert order == ["clip.glb", "clip.bvh", "clip.json"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.bvh", "clip.glb", "clip.json"]
+    assert _open_descriptors() == before
     assert (tmp_path / "clip.glb").read_bytes() == b"glTF"
 
 
+def _open_descriptors() -> int:
+    import os
+
+    return len(os.listdir("/proc/self/fd")) if os.path.isdir("/proc/self/fd") else 0
+
+
 def test_an_aborted_set_removes_a_reserved_file_written_or_not(tmp_path):
+    before = _open_descriptors()
     with OutputSet() as written:
         written.reserve(tmp_path / "a.glb")(b"data")
         written.reserve(tmp_path / "b.glb")
     assert list(tmp_path.iterdir()) == []
+    assert _open_descriptors() == before  # (each reserved file's descriptor and lock let go)
+
+
+def test_a_reserved_file_whose_writing_failed_is_neither_renamed_nor_left(tmp_path):
+    """A writer that fails (its data raising half way) leaves the set able to commit the rest: the failed
+    file is not renamed onto its target, its temporary is removed, and no descriptor stays open."""
+    before = _open_descriptors()
+
+    def broken():
+        yield b"half"
+        raise OSError(28, "No space left on device")
+
+    with OutputSet() as written:
+        usd = written.reserve(tmp_path / "clip.usdc")
+        unused = written.reserve(tmp_path / "clip.fbx")
+        with pytest.raises(OSError, match="clip.usdc"):
+            usd(broken())
+        written.add(tmp_path / "clip.bvh", b"motion")
+        written.commit()
+    assert unused is not None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.bvh"]
+    assert _open_descriptors() == before
 
 
 def test_a_stage_added_to_the_declared_list_runs_in_its_place(sample_clip):

@@ -187,6 +187,23 @@ static int parents_in_order(const int64_t *parents, Py_ssize_t joints, const cha
     return !bad;
 }
 
+/* A copy of the caller's parents (joints >= 1), checked by parents_in_order; NULL with the error set. The loops
+ * read the copy with the GIL let go: another thread changing the caller's array then cannot send them out of
+ * bounds. PyMem_Free it. */
+static int64_t *parents_copy(const Py_buffer *view, Py_ssize_t joints, const char *name) {
+    int64_t *copy = PyMem_Malloc((size_t)joints * sizeof(int64_t));
+    if (copy == NULL) {
+        PyErr_NoMemory();
+        return NULL;
+    }
+    memcpy(copy, view->buf, (size_t)joints * sizeof(int64_t));
+    if (!parents_in_order(copy, joints, name)) {
+        PyMem_Free(copy);
+        return NULL;
+    }
+    return copy;
+}
+
 static PyObject *local_from_world(PyObject *self, PyObject *args) {
     PyObject *objects[5];
     Py_ssize_t frames, joints;
@@ -200,8 +217,8 @@ static PyObject *local_from_world(PyObject *self, PyObject *args) {
     const char *names[5] = {"parents", "world_rot", "world_pos", "local_rot", "local_pos"};
     int got = get_arrays(objects, views, "qdddd", "rrrww", counts, names, 5);
     int bad = got < 5;
-    const int64_t *parents = bad ? NULL : (const int64_t *)views[0].buf;
-    if (!bad) bad = !parents_in_order(parents, joints, "local_from_world");
+    int64_t *parents = bad ? NULL : parents_copy(&views[0], joints, "local_from_world");
+    if (!bad) bad = parents == NULL;
     if (!bad) {
         const double *world_rot = (const double *)views[1].buf;
         const double *world_pos = (const double *)views[2].buf;
@@ -228,6 +245,7 @@ static PyObject *local_from_world(PyObject *self, PyObject *args) {
         }
         Py_END_ALLOW_THREADS
     }
+    PyMem_Free(parents);
     return finish(views, got, bad);
 }
 
@@ -241,8 +259,8 @@ static PyObject *forward_kinematics(PyObject *self, PyObject *args) {
     const char *names[3] = {"parents", "rot", "pos"};
     int got = get_arrays(objects, views, "qdd", "rww", counts, names, 3);
     int bad = got < 3;
-    const int64_t *parents = bad ? NULL : (const int64_t *)views[0].buf;
-    if (!bad) bad = !parents_in_order(parents, joints, "forward_kinematics");
+    int64_t *parents = bad ? NULL : parents_copy(&views[0], joints, "forward_kinematics");
+    if (!bad) bad = parents == NULL;
     if (!bad) {
         double *rot = (double *)views[1].buf;
         double *pos = (double *)views[2].buf;
@@ -262,6 +280,7 @@ static PyObject *forward_kinematics(PyObject *self, PyObject *args) {
         }
         Py_END_ALLOW_THREADS
     }
+    PyMem_Free(parents);
     return finish(views, got, bad);
 }
 
@@ -584,8 +603,8 @@ static PyObject *chain_add(PyObject *self, PyObject *args) {
     const char *names[3] = {"pos", "parents", "links"};
     int got = get_arrays(objects, views, "dqd", "wrr", counts, names, 3);
     int bad = got < 3;
-    const int64_t *parents = bad ? NULL : (const int64_t *)views[1].buf;
-    if (!bad) bad = !parents_in_order(parents, joints, "chain_add");
+    int64_t *parents = bad ? NULL : parents_copy(&views[1], joints, "chain_add");
+    if (!bad) bad = parents == NULL;
     if (!bad) {
         double *pos = (double *)views[0].buf;
         const double *links = (const double *)views[2].buf;
@@ -602,6 +621,7 @@ static PyObject *chain_add(PyObject *self, PyObject *args) {
         }
         Py_END_ALLOW_THREADS
     }
+    PyMem_Free(parents);
     return finish(views, got, bad);
 }
 

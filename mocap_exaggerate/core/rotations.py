@@ -618,7 +618,9 @@ def unit_track(q: np.ndarray, joint: int | None = None, *, compiled: bool = True
     if joint is None:
         q = q[:, None]
         joint = 0
-    if compiled and _kernels is not None and q.ndim == 3 and q.shape[2] == 4:
+    if q.ndim != 3 or q.shape[2] != 4 or not 0 <= joint < q.shape[1]:
+        raise ValueError(f"unit_track: a track (F, 4), or joint {joint} of (F, J, 4) rotations; got {q.shape}")
+    if compiled and getattr(_kernels, "unit_track", None) is not None:
         out = np.empty((len(q), 4))
         _kernels.unit_track(np.ascontiguousarray(q), out, len(q), q.shape[1], int(joint))
         return out

@@ -190,7 +190,14 @@ static PyObject *format_columns(PyObject *self, PyObject *args) {
         PyBuffer_Release(&views[2]);
         return NULL;
     }
-    const int64_t *picks = (const int64_t *)views[2].buf;
+    /* The picks are copied before they are checked: the loop reads them with the GIL let go, when another
+     * thread could change the caller's array. */
+    int64_t *picks = cols >= 1 ? PyMem_Malloc((size_t)cols * sizeof(int64_t)) : NULL;
+    if (cols >= 1 && picks == NULL) {
+        for (int i = 0; i < 3; i++) PyBuffer_Release(&views[i]);
+        return PyErr_NoMemory();
+    }
+    if (picks != NULL) memcpy(picks, views[2].buf, (size_t)cols * sizeof(int64_t));
     int fits = cols >= 1 && rows <= (PY_SSIZE_T_MAX - 1) / cols / 24;
     for (Py_ssize_t c = 0; c < cols && fits; c++)
         fits = picks[c] >= 0 ? picks[c] < widths[0] : -1 - picks[c] < widths[1];
@@ -229,6 +236,7 @@ static PyObject *format_columns(PyObject *self, PyObject *args) {
             result = NULL;
         }
     }
+    PyMem_Free(picks);
     for (int i = 0; i < 3; i++) PyBuffer_Release(&views[i]);
     return result;
 }

@@ -857,7 +857,7 @@ def _motion_lines(motion: Motion, block: int, positions: str = "standard", *, co
     skeleton = motion.skeleton
     orders = {skeleton.rotation_order(j) for j in range(skeleton.num_joints)
               if any(c in ROTATION_CHANNELS for c in skeleton.channels[j])}
-    if (not compiled or _compiled is None or len(orders) != 1
+    if (not compiled or getattr(_compiled, "format_columns", None) is None or len(orders) != 1
             or written_positions(skeleton, positions) == "add"):
         for values in _channel_blocks(motion, block, positions):
             yield format_fixed(values, compiled=compiled)

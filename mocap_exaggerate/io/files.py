@@ -181,10 +181,10 @@ class OutputSet:
 
     def reserve(self, path: str | os.PathLike) -> Callable[[Any], str]:
         """A temporary file for ``path``, its place among the renames taken now; the function that writes
-        ``data`` into it and returns its digest, once. It touches nothing of the set: it may run on another
-        thread (the job writes the GLB on the thread that built it while the BVH is written), as long as
-        that thread is done before the set is committed or aborted. A file reserved and never written is
-        not renamed onto its target."""
+        ``data`` into it and returns its digest, once. It touches only its own file and entries: it may run
+        on another thread (the job writes the GLB on the thread that built it while the BVH is written), as
+        long as that thread is done before the set is committed. A file reserved and never written (or
+        whose writing failed) is not renamed onto its target, and its temporary is removed."""
         path = Path(path)
         if path.exists() and not self.overwrite:
             raise OutputExistsError(path)
@@ -236,9 +236,11 @@ class OutputSet:
         late : targets renamed after the others but before the last one added (the manifest)
         """
         for tmp, path in [item for item in self.pending if item[0] not in self.written]:  # reserved, never written
+            fd = self.unwritten.pop(tmp, None)  # (None: its writer took it and failed)
+            if fd is not None:
+                os.close(fd)
+            _remove(tmp)  # (before it leaves the list abort clears, so it is never left behind)
             self.pending.remove((tmp, path))
-            os.close(self.unwritten.pop(tmp))
-            _remove(tmp)
         if late and len(self.pending) > 1:
             last = self.pending[-1]
             late_set = {Path(path) for path in late}
@@ -304,9 +306,10 @@ class OutputSet:
 
     def _let_go(self) -> None:
         """Release the temporary files' locks (each now a target, or removed)."""
-        for fd in self.unwritten.values():
-            os.close(fd)
-        self.unwritten.clear()
+        for tmp in list(self.unwritten):  # (a writer still running on its thread may take its own meanwhile)
+            fd = self.unwritten.pop(tmp, None)
+            if fd is not None:
+                os.close(fd)
         for live in self.live:
             os.close(live)  # (closing releases the lock)
         self.live.clear()

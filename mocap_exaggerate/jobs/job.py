@@ -369,7 +369,8 @@ def convert(
         remove_stale_temporaries(target, keep=inputs)  # what a killed earlier run of these outputs left
     info = None
     outputs: dict[str, Any] = {}
-    # (The pool inside the set: its thread is done before the set is committed or aborted.)
+    # (The pool inside the set: its thread is done before the set is committed, and before it is aborted
+    # but for a second Ctrl-C while it finishes, when the set's files are removed under it.)
     with OutputSet(overwrite=True) as written, ThreadPoolExecutor(max_workers=1) as pool:
         # The GLB is built and written while the BVH is formatted and written: both spend most of
         # their time in NumPy, C and the file system, which let go of the GIL, so two cores share the work.

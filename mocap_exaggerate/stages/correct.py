@@ -296,8 +296,9 @@ def _rebuild(pos: np.ndarray, parents: np.ndarray, vec: np.ndarray, length: np.n
     (in place on ``pos``; ``compiled``: by ``core/_kernels.c`` where it was built, the same bits)."""
     scale = np.divide(new_length, length, out=np.ones_like(length), where=length > 0)
     links = vec * scale[..., None]
-    if (compiled and _kernels is not None and pos.dtype == np.float64 and pos.flags.c_contiguous and pos.ndim == 3
-            and len(parents) > 1 and links.shape == (len(pos), len(parents) - 1, 3)):
+    if (compiled and getattr(_kernels, "chain_add", None) is not None and pos.dtype == np.float64
+            and pos.flags.c_contiguous and pos.ndim == 3 and len(parents) > 1
+            and links.shape == (len(pos), len(parents) - 1, 3)):
         _kernels.chain_add(pos, np.ascontiguousarray(parents, dtype=np.int64), np.ascontiguousarray(links), len(pos),
                            len(parents))  # (the loop below, a frame at a time in C: the same bits)
         return pos
