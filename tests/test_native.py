@@ -156,3 +156,54 @@ def test_work_shared_again_inside_a_shared_part_runs_whole(monkeypatch):
 
     native.on_both_cores(outer, native.frame_halves(100))
     assert after == [[slice(0, 100)], [slice(0, 100)]]
+
+
+_CHANGED_UNDER = r"""
+import sys, threading
+import numpy as np
+from mocap_exaggerate.core.native import kernels
+from mocap_exaggerate.io import bvh
+
+if kernels is None or bvh._compiled is None:
+    print("not built"); sys.exit(0)
+rows = 200_000
+table = np.zeros((rows, 3))
+picks = np.array([0, 1, 2], dtype=np.int64)
+pos, links = np.zeros((rows, 4, 3)), np.zeros((rows, 3, 3))
+parents = np.array([-1, 0, 1, 2], dtype=np.int64)
+follow, out = np.zeros((50_000, 3, 3)), np.zeros((50_000, 3, 3))
+ends = np.array([0, 1], dtype=np.int64)
+stop = False
+
+def flip():  # the index arrays changed again and again while the loops run with the GIL let go
+    while not stop:
+        picks[0] = parents[3] = ends[1] = 1 << 40
+        picks[0], parents[3], ends[1] = 0, 2, 1
+
+thread = threading.Thread(target=flip)
+thread.start()
+try:
+    for _ in range(40):
+        for call in (lambda: bvh._compiled.format_columns(table, table, picks, rows, 3, 3, 6),
+                     lambda: kernels.chain_add(pos, parents, links, rows, 4),
+                     lambda: kernels.springs(follow, out, ends, ends[::-1].copy(), 50_000, 3, 2, 0.01, 1, 100.0,
+                                             10.0, 1.0)):
+            try:
+                call()
+            except ValueError:
+                pass
+finally:
+    stop = True
+    thread.join()
+print("survived")
+"""
+
+
+def test_index_arrays_changed_by_another_thread_never_send_a_loop_out_of_bounds():
+    """The compiled loops read their index arrays (the formatter's picks, parents, the springs' links) with the
+    GIL let go: each is copied before it is checked, so another thread writing the caller's array meanwhile
+    cannot make a loop read or write outside its arrays (a review's reproduction was a segfault). Run in a
+    process of its own: a crash fails the test instead of ending the run."""
+    done = subprocess.run([sys.executable, "-c", _CHANGED_UNDER], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, f"exit {done.returncode}: {done.stderr[-2000:]}"
+    assert done.stdout.strip() in ("survived", "not built")

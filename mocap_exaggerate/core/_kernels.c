@@ -187,6 +187,19 @@ static int parents_in_order(const int64_t *parents, Py_ssize_t joints, const cha
     return !bad;
 }
 
+/* A private copy of n int64 items of a buffer got by get_array (the index arrays a loop reads with the GIL let
+ * go are checked and read from it: another thread changing the caller's array cannot send the loop out of
+ * bounds); NULL with MemoryError set. PyMem_Free it. */
+static int64_t *items_copy(const Py_buffer *view, Py_ssize_t n) {
+    int64_t *copy = PyMem_Malloc((size_t)(n > 0 ? n : 1) * sizeof(int64_t));
+    if (copy == NULL) {
+        PyErr_NoMemory();
+        return NULL;
+    }
+    if (n > 0) memcpy(copy, view->buf, (size_t)n * sizeof(int64_t));
+    return copy;
+}
+
 /* A copy of the caller's parents (joints >= 1), checked by parents_in_order; NULL with the error set. The loops
  * read the copy with the GIL let go: another thread changing the caller's array then cannot send them out of
  * bounds. PyMem_Free it. */
@@ -300,9 +313,14 @@ static PyObject *chain_frames(PyObject *self, PyObject *args) {
     const char *names[6] = {"out", "positions", "heads", "starts", "cuts", "direction"};
     int got = get_arrays(objects, views, "ddqqqd", "wrrrrr", counts, names, 6);
     int bad = got < 6;
+    int64_t *heads = NULL, *starts = NULL, *cuts = NULL;
     if (!bad) {
-        const int64_t *heads = (const int64_t *)views[2].buf, *starts = (const int64_t *)views[3].buf;
-        const int64_t *cuts = (const int64_t *)views[4].buf;
+        heads = items_copy(&views[2], links);
+        starts = heads == NULL ? NULL : items_copy(&views[3], links);
+        cuts = starts == NULL ? NULL : items_copy(&views[4], links);
+        bad = cuts == NULL;
+    }
+    if (!bad) {
         for (Py_ssize_t l = 0; l < links && !bad; l++) /* every joint read or written inside the arrays */
             bad = heads[l] < 0 || heads[l] >= joints || starts[l] < 0 || starts[l] >= joints || cuts[l] < 0 ||
                   cuts[l] >= joints - starts[l]; /* (written so that no sum wraps) */
@@ -311,8 +329,6 @@ static PyObject *chain_frames(PyObject *self, PyObject *args) {
     if (!bad) {
         double *out = (double *)views[0].buf;
         const double *positions = (const double *)views[1].buf;
-        const int64_t *heads = (const int64_t *)views[2].buf, *starts = (const int64_t *)views[3].buf;
-        const int64_t *cuts = (const int64_t *)views[4].buf;
         const double *direction = (const double *)views[5].buf;
         Py_BEGIN_ALLOW_THREADS
         for (Py_ssize_t f = 0; f < frames; f++) {
@@ -337,6 +353,9 @@ static PyObject *chain_frames(PyObject *self, PyObject *args) {
         }
         Py_END_ALLOW_THREADS
     }
+    PyMem_Free(heads);
+    PyMem_Free(starts);
+    PyMem_Free(cuts);
     return finish(views, got, bad);
 }
 
@@ -356,8 +375,13 @@ static PyObject *twist_frames(PyObject *self, PyObject *args) {
     const char *names[5] = {"out", "angle", "starts", "cuts", "direction"};
     int got = get_arrays(objects, views, "ddqqd", "wrrrr", counts, names, 5);
     int bad = got < 5;
+    int64_t *starts = NULL, *cuts = NULL;
     if (!bad) {
-        const int64_t *starts = (const int64_t *)views[2].buf, *cuts = (const int64_t *)views[3].buf;
+        starts = items_copy(&views[2], links);
+        cuts = starts == NULL ? NULL : items_copy(&views[3], links);
+        bad = cuts == NULL;
+    }
+    if (!bad) {
         for (Py_ssize_t l = 0; l < links && !bad; l++)
             bad = starts[l] < 0 || starts[l] >= joints || cuts[l] < 1 || cuts[l] > joints - starts[l];
         if (bad) PyErr_SetString(PyExc_ValueError, "twist_frames: a link's joints are outside the skeleton");
@@ -365,7 +389,6 @@ static PyObject *twist_frames(PyObject *self, PyObject *args) {
     if (!bad) {
         double *out = (double *)views[0].buf;
         const double *angle = (const double *)views[1].buf, *direction = (const double *)views[4].buf;
-        const int64_t *starts = (const int64_t *)views[2].buf, *cuts = (const int64_t *)views[3].buf;
         Py_BEGIN_ALLOW_THREADS
         for (Py_ssize_t f = 0; f < frames; f++) {
             double *rot = out + f * joints * 4;
@@ -386,6 +409,8 @@ static PyObject *twist_frames(PyObject *self, PyObject *args) {
         }
         Py_END_ALLOW_THREADS
     }
+    PyMem_Free(starts);
+    PyMem_Free(cuts);
     return finish(views, got, bad);
 }
 
@@ -517,8 +542,14 @@ static PyObject *springs(PyObject *self, PyObject *args) {
     const char *names[4] = {"follow", "out", "link_a", "link_b"};
     int got = get_arrays(objects, views, "ddqq", "rwrr", counts, names, 4);
     int bad = got < 4;
+    int64_t *link_a = NULL, *link_b = NULL;
     if (!bad) {
-        const int64_t *a = (const int64_t *)views[2].buf, *b = (const int64_t *)views[3].buf;
+        link_a = items_copy(&views[2], links);
+        link_b = link_a == NULL ? NULL : items_copy(&views[3], links);
+        bad = link_b == NULL;
+    }
+    if (!bad) {
+        const int64_t *a = link_a, *b = link_b;
         for (Py_ssize_t l = 0; l < links && !bad; l++) bad = a[l] < 0 || a[l] >= count || b[l] < 0 || b[l] >= count;
         if (bad) PyErr_SetString(PyExc_ValueError, "springs: a link's particles are outside the set");
     }
@@ -533,7 +564,6 @@ static PyObject *springs(PyObject *self, PyObject *args) {
     if (!bad && frames >= 2) {
         const double *follow = (const double *)views[0].buf;
         double *out = (double *)views[1].buf;
-        const int64_t *link_a = (const int64_t *)views[2].buf, *link_b = (const int64_t *)views[3].buf;
         double *x = work, *v = work + count * 3, *anchor = work + count * 6, *rest = work + count * 15;
         double *pulled_a = work + count * 9, *pulled_b = work + count * 12; /* the link forces on each end */
         const Py_ssize_t n = count * 3;
@@ -588,6 +618,8 @@ static PyObject *springs(PyObject *self, PyObject *args) {
         memcpy(views[1].buf, views[0].buf, sizeof(double) * (size_t)(count * 3));
     }
     PyMem_RawFree(work);
+    PyMem_Free(link_a);
+    PyMem_Free(link_b);
     return finish(views, got, bad);
 }
 
