@@ -42,9 +42,9 @@ class Capsule(NamedTuple):
     radius: float
     extend: float = 0.0
 
-    def ends(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(F, 3) the axis's two ends in ``positions (F, J, 3)``."""
-        a, b = positions[:, self.a], positions[:, self.b]
+    def ends(self, positions: np.ndarray, rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """(F, 3) the axis's two ends in ``positions (F, J, 3)`` (on the frames ``rows``)."""
+        a, b = positions[rows, self.a], positions[rows, self.b]
         return a, b + self.extend * (b - a)
 
 
@@ -148,9 +148,7 @@ class CapturedSides:
     def side(self, part: Part, capsule: Capsule, rows: np.ndarray) -> np.ndarray:
         """(len(rows), 3) the way from ``capsule``'s axis to ``part`` on the frames ``rows``."""
         at = self.reference
-        r0, r1 = at[rows, capsule.a], at[rows, capsule.b]
-        r1 = r1 + capsule.extend * (r1 - r0)  # (`Capsule.ends`)
-        return segment_closest(at[rows, part.a], at[rows, part.b], r0, r1)[2]
+        return segment_closest(at[rows, part.a], at[rows, part.b], *capsule.ends(at, rows))[2]
 
 
 def penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Part],

@@ -204,12 +204,8 @@ static int64_t *items_copy(const Py_buffer *view, Py_ssize_t n) {
  * read the copy with the GIL let go: another thread changing the caller's array then cannot send them out of
  * bounds. PyMem_Free it. */
 static int64_t *parents_copy(const Py_buffer *view, Py_ssize_t joints, const char *name) {
-    int64_t *copy = PyMem_Malloc((size_t)joints * sizeof(int64_t));
-    if (copy == NULL) {
-        PyErr_NoMemory();
-        return NULL;
-    }
-    memcpy(copy, view->buf, (size_t)joints * sizeof(int64_t));
+    int64_t *copy = items_copy(view, joints);
+    if (copy == NULL) return NULL;
     if (!parents_in_order(copy, joints, name)) {
         PyMem_Free(copy);
         return NULL;

@@ -679,6 +679,25 @@ def motion_channels(motion: Motion, *, positions: str = "standard") -> np.ndarra
     return np.concatenate(blocks or [np.zeros((motion.num_frames, 0))])
 
 
+def _channel_layout(skeleton):
+    """Where each channel of a motion line comes from: the joints with rotation channels by rotation order
+    (order -> joints), and per column whether it is an angle, its joint and its component (the axis's
+    place in the joint's order for an angle, in XYZ for a position)."""
+    by_order: dict[str, list[int]] = {}
+    for j in range(skeleton.num_joints):
+        if any(c in ROTATION_CHANNELS for c in skeleton.channels[j]):
+            by_order.setdefault(skeleton.rotation_order(j), []).append(j)
+    source, joint, component = [], [], []
+    for j, names in enumerate(skeleton.channels):
+        order = skeleton.rotation_order(j)
+        for name in names:
+            rotation = name in ROTATION_CHANNELS
+            source.append(int(rotation))
+            joint.append(j)
+            component.append(order.index(name[0]) if rotation else "XYZ".index(name[0]))
+    return by_order, np.array(source, bool), np.array(joint, np.int64), np.array(component, np.int64)
+
+
 def _channel_blocks(motion: Motion, block: int, positions: str = "standard"):
     """BVH channel values ``(n, C)`` for consecutive blocks of ``block`` frames.
 
@@ -688,22 +707,9 @@ def _channel_blocks(motion: Motion, block: int, positions: str = "standard"):
     skeleton = motion.skeleton
     adds = written_positions(skeleton, positions) == "add"
     frames = motion.num_frames
-    by_order: dict[str, list[int]] = {}
-    for j in range(skeleton.num_joints):
-        if any(c in ROTATION_CHANNELS for c in skeleton.channels[j]):
-            by_order.setdefault(skeleton.rotation_order(j), []).append(j)
+    by_order, source, joint, component = _channel_layout(skeleton)
     angles = {order: euler_blocks(motion.local_rotations, order, motion.euler_hint, block, columns=members)
               for order, members in by_order.items()}
-    # Each column: (0 position / 1 angle, joint, component).
-    source, joint, component = [], [], []
-    for j, names in enumerate(skeleton.channels):
-        order = skeleton.rotation_order(j)
-        for name in names:
-            rotation = name in ROTATION_CHANNELS
-            source.append(int(rotation))
-            joint.append(j)
-            component.append(order.index(name[0]) if rotation else "XYZ".index(name[0]))
-    source, joint, component = np.array(source, bool), np.array(joint, np.int64), np.array(component, np.int64)
     euler = np.zeros((min(block, frames), skeleton.num_joints, 3))
     for start in range(0, frames, block):
         part = slice(start, min(start + block, frames))
@@ -855,20 +861,17 @@ def _motion_lines(motion: Motion, block: int, positions: str = "standard", *, co
     written as they are, it reads each channel from the block's positions and Euler angles where they lie
     (`format_columns`: no table of channels is made); the same bytes."""
     skeleton = motion.skeleton
-    orders = {skeleton.rotation_order(j) for j in range(skeleton.num_joints)
-              if any(c in ROTATION_CHANNELS for c in skeleton.channels[j])}
-    if (not compiled or getattr(_compiled, "format_columns", None) is None or len(orders) != 1
+    by_order, source, joint, component = _channel_layout(skeleton)
+    if (not compiled or getattr(_compiled, "format_columns", None) is None or len(by_order) != 1
             or written_positions(skeleton, positions) == "add"):
         for values in _channel_blocks(motion, block, positions):
             yield format_fixed(values, compiled=compiled)
         return
-    order = orders.pop()
-    members = [j for j in range(skeleton.num_joints) if any(c in ROTATION_CHANNELS for c in skeleton.channels[j])]
-    column = {j: k for k, j in enumerate(members)}
+    (order, members), = by_order.items()
+    column = np.zeros(skeleton.num_joints, dtype=np.int64)
+    column[members] = np.arange(len(members))
     # Each channel: where it lies in a frame's positions (j, axis), or -1 - where in its Euler angles.
-    picks = np.array([-1 - (3 * column[j] + order.index(name[0])) if name in ROTATION_CHANNELS
-                      else 3 * j + "XYZ".index(name[0])
-                      for j, names in enumerate(skeleton.channels) for name in names], dtype=np.int64)
+    picks = np.where(source, -1 - (3 * column[joint] + component), 3 * joint + component)
     angles = euler_blocks(motion.local_rotations, order, motion.euler_hint, block, columns=members)
     frames, width = motion.num_frames, 3 * skeleton.num_joints
     for start in range(0, frames, block):
