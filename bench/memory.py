@@ -91,8 +91,12 @@ def resident(path: Path, folder: Path, frames: int) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, nargs="+", default=[10_000, 30_000])
+    parser.add_argument("--frames", type=int, nargs="+", default=[10_000, 30_000],
+                        help="clip lengths to measure, 2 to 500,000 frames (the reader's cap)")
     args = parser.parse_args()
+    wrong = [n for n in args.frames if not 2 <= n <= 500_000]
+    if wrong:  # (before any clip is tiled: one line, exit 2, nothing written)
+        parser.error(f"--frames: {wrong[0]} is not between 2 and 500,000")
     source = SHARED / "cmu_01_01_forward_jumps.bvh"
     if not source.exists():
         raise SystemExit(f"needs the shared clips: {source} is missing")
