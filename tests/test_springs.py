@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 
 from mocap_exaggerate.config import load_preset
 from mocap_exaggerate.core.errors import ConfigError
+from mocap_exaggerate.core.timing import soft_limit
 from mocap_exaggerate.io.bvh import read_bvh
 from mocap_exaggerate.pipeline import run
 from mocap_exaggerate.stages import springs
@@ -285,3 +286,26 @@ def test_no_link_of_a_looney_dance_stretches_past_the_presets_range():
              / np.maximum(np.linalg.norm(captured[:, 1:] - captured[:, parents[1:]], axis=-1), 1e-9))
     assert ratio.max() <= config.springs.max_stretch
     assert ratio.max() > 1.5  # still rubber: the lag stretches past the correction's free stretch
+
+
+@pytest.mark.unit
+def test_soft_limit_is_its_formula_in_any_memory_layout():
+    """The soft limit takes its tanh only of the values over the knee; it must place them back where they
+    came from whatever the arrays' layout (a Fortran-ordered or strided length once got them back unchanged)."""
+    rng = np.random.default_rng(7)
+    value = rng.uniform(0.0, 3.0, (300, 40))
+    knee = rng.uniform(0.5, 1.5, (300, 40))
+    top = knee + rng.uniform(-0.2, 1.0, (300, 40))  # some rooms <= 0: a hard minimum there
+    room = top - knee
+    eased = knee + room * np.tanh(np.divide(value - knee, room, out=np.zeros_like(room), where=room > 0))
+    expected = np.where(value - knee <= 0, value, np.where(room > 0, eased, np.minimum(value, top)))
+    assert np.any(value > knee) and np.any(value <= knee) and np.any((value > knee) & (room <= 0))
+    for layout in (np.ascontiguousarray, np.asfortranarray):
+        got = soft_limit(layout(value), layout(knee), layout(top))
+        assert np.array_equal(got, expected)
+    strided = np.repeat(value, 2, axis=1)[:, ::2]
+    assert np.array_equal(soft_limit(strided, knee, top), expected)
+    column = value[:, :1]  # broadcast against the knee and top
+    assert np.array_equal(soft_limit(column, knee, top)[:, 5], soft_limit(value[:, 0], knee[:, 5], top[:, 5]))
+    assert soft_limit(0.5, 1.0, 2.0) == 0.5 and soft_limit(9.0, 1.0, 2.0) == pytest.approx(1.0 + np.tanh(8.0))
+    assert soft_limit(value, knee, top) is not value

@@ -200,10 +200,14 @@ def soft_limit(value: np.ndarray, knee: np.ndarray, top: np.ndarray) -> np.ndarr
     [1.0, 1.5, 1.881, 2.0]
     """
     value, knee, top = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (value, knee, top)))
-    room = top - knee
-    over = value - knee
-    eased = knee + room * np.tanh(np.divide(over, room, out=np.zeros_like(over), where=room > 0))
-    return np.where(over <= 0, value, np.where(room > 0, eased, np.minimum(value, top)))
+    out = np.array(value, order="C")  # (most values are under the knee: the tanh is taken only of those over it)
+    over = np.flatnonzero(value - knee > 0)
+    if len(over):
+        value, knee, top = value.ravel()[over], knee.ravel()[over], top.ravel()[over]
+        room = top - knee
+        eased = knee + room * np.tanh(np.divide(value - knee, room, out=np.zeros_like(room), where=room > 0))
+        out.ravel()[over] = np.where(room > 0, eased, np.minimum(value, top))
+    return out
 
 
 def end_ramp(frames: int, length: float) -> np.ndarray:

@@ -74,8 +74,10 @@ def _keep_bends(positions: np.ndarray, captured: np.ndarray, hinges, margin: flo
     return out
 
 
-def keep_bends_on_rubber(sub_positions: np.ndarray, hierarchy, captured: np.ndarray, hinges) -> np.ndarray:
-    """`keep_bends` on the original joints of rubber positions ``(F, J', 3)``; a new array.
+def keep_bends_on_rubber(sub_positions: np.ndarray, hierarchy, captured: np.ndarray, hinges, *,
+                         in_place: bool = False) -> np.ndarray:
+    """`keep_bends` on the original joints of rubber positions ``(F, J', 3)``; a new array (``in_place``:
+    ``sub_positions`` itself, a float64 array or a view of one).
 
     A middle joint (knee, elbow) that moves takes the sub-joints on the links either
     side with it in proportion to their place along them, so the limb bends at the
@@ -83,7 +85,7 @@ def keep_bends_on_rubber(sub_positions: np.ndarray, hierarchy, captured: np.ndar
     cores; whether a hinge moves at all is told from the whole clip, as the sub-joints' moves are
     added to every frame of a hinge that moves anywhere.)
     """
-    out = np.array(sub_positions, dtype=np.float64)
+    out = sub_positions if in_place else np.array(sub_positions, dtype=np.float64)
     joints = out[:, hierarchy.original]
     bent = keep_bends(joints, captured, hinges)
     for hinge in hinges:

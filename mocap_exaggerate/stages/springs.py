@@ -290,6 +290,7 @@ def simulate_springs(
     active: np.ndarray | None = None,
     links: SpringLinks | None = None,
     compiled: bool = True,
+    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """Blend the suspended particles' motion into ``positions``.
 
@@ -304,15 +305,17 @@ def simulate_springs(
     links : the topology from `spring_links` (computed from parents and active when None)
     compiled : False runs the plain per-particle Python loop (the test oracle); True the time loop in
         ``core/_kernels.c`` where it was built, else the NumPy one
+    out : a float64 array holding ``positions``' values (not the same memory), to write the result into
+        instead of a copy (only the suspended joints are written)
 
     Returns
     -------
-    (F, J, 3) float64. ``blend == 0`` returns a copy; a still pose stays still.
+    (F, J, 3) float64 (``out`` when given). ``blend == 0`` returns a copy; a still pose stays still.
     """
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim != 3 or positions.shape[-1] != 3:
         raise ValueError(f"positions must be (F, J, 3), got {positions.shape}")
-    out = positions.copy()
+    out = positions.copy() if out is None else out
     blend = np.asarray(blend, dtype=np.float64)
     if not np.any(blend) or positions.shape[0] < 2:
         return out
@@ -326,7 +329,11 @@ def simulate_springs(
     suspended = kernel(follow, link_a, link_b, float(frame_time), substeps, float(stiffness),
                        float(link_stiffness), float(damping))
     share = blend[members][:, None] if blend.ndim else blend
-    out[:, members] = (1.0 - share) * follow + share * suspended
+    # (1 - share) follow + share suspended, its two products made in the arrays they are made from
+    np.multiply(share, suspended, out=suspended)
+    np.multiply(1.0 - share, follow, out=follow)
+    follow += suspended
+    out[:, members] = follow
     return out
 
 
@@ -344,13 +351,13 @@ def springs_stage(state: State, config: SpringConfig) -> State:
     active, blend = hanging_links(state.motion.skeleton, hierarchy, state.limbs, config.blend)
     links = spring_links(parents, active)
     out = positions.copy()
-    out[state.first:] = simulate_springs(
+    simulate_springs(
         positions[state.first:], parents, frame_time, stiffness=config.stiffness,
-        link_stiffness=config.link_stiffness, damping=config.damping, blend=blend, links=links,
+        link_stiffness=config.link_stiffness, damping=config.damping, blend=blend, links=links, out=out[state.first:],
     )
     # The knees' and elbows' lag may carry them behind the line again: bend them back.
     hinges = limb_hinges(state.motion.skeleton, state.limbs)
-    out[state.first:] = keep_bends_on_rubber(out[state.first:], hierarchy, state.captured_pos[state.first:], hinges)
+    keep_bends_on_rubber(out[state.first:], hierarchy, state.captured_pos[state.first:], hinges, in_place=True)
     # The lag bunches sub-joints along a limb as well as bending it: make its sub-links even again.
     swung = np.flatnonzero(np.asarray(blend) * active > 0)
     swinging = np.unique(hierarchy.link_child[swung])
@@ -416,29 +423,33 @@ def limit_stretch(positions: np.ndarray, before: np.ndarray, parents: np.ndarray
 def _limit_block(positions: np.ndarray, before: np.ndarray, parents: np.ndarray, limited: np.ndarray,
                  rest: np.ndarray, way: np.ndarray, most: float, least: float = 0.0) -> None:
     """`limit_stretch` on a block of frames, in place."""
-    vectors = positions[:, 1:] - positions[:, parents[1:]]
+    ends = np.flatnonzero(limited) + 1  # (only the limited links are measured: every other link's move is its parent's)
+    vectors = positions[:, ends] - positions[:, parents[ends]]
     length = np.sqrt(np.einsum("fjc,fjc->fj", vectors, vectors))
-    had = vector_norm(before[:, 1:][:, limited] - before[:, parents[1:][limited]])
+    had = vector_norm(before[:, ends] - before[:, parents[ends]])
     knee = np.maximum(had, rest + LIMIT_KNEE * way)
     top = np.maximum(most * rest, knee + LIMIT_ROOM * way)
-    new_length = soft_limit(length[:, limited], knee, top)
+    new_length = soft_limit(length, knee, top)
     if least > 0:  # the floor: the same soft limit on how far a link is shorter than its rest length
         room = (1.0 - least) * rest
         low = np.minimum(had, rest - LIMIT_KNEE * room)
         bottom = np.minimum(least * rest, low - LIMIT_ROOM * room)
         new_length = np.where(new_length < low, low - soft_limit(low - new_length, 0.0, low - bottom), new_length)
-    scale = np.ones_like(length)
-    scale[:, limited] = np.divide(new_length, length[:, limited], out=np.ones_like(new_length),
-                                  where=length[:, limited] > 0)
+    scale = np.divide(new_length, length, out=np.ones_like(new_length), where=length > 0)
     rows = np.flatnonzero(np.any(scale != 1.0, axis=1))  # the frames where something is shortened
     if not len(rows):
         return
     # Each joint's move: its parent's, plus its own link's shortening (joint by joint, each a contiguous
-    # block of the frames that move).
+    # block of the frames that move). A shift is never -0.0 (the root's is +0.0, and a sum is -0.0 only of
+    # two), so a link that is not limited adds nothing to its parent's.
     own = np.ascontiguousarray(((scale[rows] - 1.0)[..., None] * vectors[rows]).transpose(1, 0, 2))
     shift = np.zeros((len(parents), len(rows), 3))
-    for joint in range(1, len(parents)):  # parents come before their children
-        shift[joint] = shift[parents[joint]] + own[joint - 1]
+    of = dict(zip(ends.tolist(), range(len(ends))))
+    for joint in range(1, len(parents)):  # parents come before their children (the root's shift is 0)
+        if joint in of:
+            shift[joint] = shift[parents[joint]] + own[of[joint]]
+        elif parents[joint] > 0:
+            shift[joint] = shift[parents[joint]]
     positions[rows] += shift.transpose(1, 0, 2)
 
 
