@@ -34,6 +34,10 @@
  * chain_add(pos, parents, links, frames, joints)
  *     pos (F, J, 3) float64 rebuilt in place down the hierarchy from links (F, J-1, 3): each joint its parent's
  *     position plus its link (correct._rebuild; one add each, NumPy's bits).
+ * euler_entries(q, out, count, i, j, k, sign)
+ *     the five entries of the rotation matrices of count unit quaternions q (count, 4) float64 that
+ *     rotations._euler_from_quat reads, made as _matrix_entry makes them, into out (6, count): sign R[i, k],
+ *     R[i, i], R[i, j], -sign R[j, k], R[k, k], -sign R[i, j] (sign +1 or -1: exact).
  * unit_track(q, out, frames, joints, joint)
  *     joint's track of quaternions q (F, joints, 4) float64, into out (F, 4), as the GLB writes it: rotations.quat_unroll (each dot product summed
  *     left to right, as np.sum sums four) and divided by vector_norm's length; NumPy's bits.
@@ -693,6 +697,54 @@ static PyObject *unit_track(PyObject *self, PyObject *args) {
     return finish(views, got, bad);
 }
 
+/* Entry (row, col) of the rotation matrix of the unit quaternion p (x, y, z, w), as rotations._matrix_entry
+ * makes it: 1 - 2 (a a + b b) on the diagonal (a, b the other two axes in order), 2 (p q -+ r w) off it. */
+static double matrix_entry(const double *p, int row, int col) {
+    if (row == col) {
+        const int a = row == 0 ? 1 : 0, b = row == 2 ? 1 : 2;
+        return 1.0 - 2.0 * (p[a] * p[a] + p[b] * p[b]);
+    }
+    const int low = row < col ? row : col, high = row < col ? col : row, third = 3 - row - col;
+    if (((col - row) % 3 + 3) % 3 == 2) return 2.0 * (p[low] * p[high] + p[third] * p[3]);
+    return 2.0 * (p[low] * p[high] - p[third] * p[3]);
+}
+
+/* What the Euler angles of intrinsic order (i, j, k) with parity sign are read from (rotations._euler_from_quat). */
+static PyObject *euler_entries(PyObject *self, PyObject *args) {
+    PyObject *objects[2];
+    Py_ssize_t count, i, j, k, sign;
+    if (!PyArg_ParseTuple(args, "OOnnnnn", &objects[0], &objects[1], &count, &i, &j, &k, &sign)) return NULL;
+    if (count < 0 || count > PY_SSIZE_T_MAX / 64 || i < 0 || i > 2 || j < 0 || j > 2 || k < 0 || k > 2 || i == j ||
+        j == k || i == k || (sign != 1 && sign != -1)) {
+        PyErr_SetString(PyExc_ValueError, "euler_entries: bad count, axes or sign");
+        return NULL;
+    }
+    Py_buffer views[2];
+    const Py_ssize_t counts[2] = {count * 4, count * 6};
+    const char *names[2] = {"q", "out"};
+    int got = get_arrays(objects, views, "dd", "rw", counts, names, 2);
+    int bad = got < 2;
+    if (!bad) {
+        const double *q = (const double *)views[0].buf;
+        double *out = (double *)views[1].buf;
+        const double s = (double)sign, minus = (double)(-sign);
+        const int I = (int)i, J = (int)j, K = (int)k;
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t n = 0; n < count; n++) {
+            const double *p = q + n * 4;
+            const double ij = matrix_entry(p, I, J);
+            out[n] = s * matrix_entry(p, I, K);
+            out[count + n] = matrix_entry(p, I, I);
+            out[2 * count + n] = ij;
+            out[3 * count + n] = minus * matrix_entry(p, J, K);
+            out[4 * count + n] = matrix_entry(p, K, K);
+            out[5 * count + n] = minus * ij;
+        }
+        Py_END_ALLOW_THREADS
+    }
+    return finish(views, got, bad);
+}
+
 static PyMethodDef methods[] = {
     {"local_from_world", local_from_world, METH_VARARGS,
      "local_from_world(parents, world_rot, world_pos, local_rot, local_pos, frames, joints): world to local."},
@@ -708,6 +760,8 @@ static PyMethodDef methods[] = {
      "euler_continuity(first, previous, parity, turns, last, frames, width, started): Euler angles made continuous."},
     {"chain_add", chain_add, METH_VARARGS,
      "chain_add(pos, parents, links, frames, joints): positions rebuilt down the hierarchy from their links."},
+    {"euler_entries", euler_entries, METH_VARARGS,
+     "euler_entries(q, out, count, i, j, k, sign): the matrix entries Euler angles are read from."},
     {"unit_track", unit_track, METH_VARARGS,
      "unit_track(q, out, frames, joints, joint): a joint's quaternion track unrolled into one hemisphere and of "
      "unit length."},

@@ -390,13 +390,22 @@ def _euler_from_quat(q: np.ndarray, order: str) -> np.ndarray:
     arbitrary: callers settle them. Only the five entries of ``R`` read are made, each by
     `_matrix_entry`, as `quat_to_matrix` makes them (the same bits as from the whole matrix, 40 % less work).
     """
-    parts = _parts(q)
     i, j, k, sign = _axes(order)
-    ii, ij = _matrix_entry(parts, i, i), _matrix_entry(parts, i, j)
-    b = np.arctan2(sign * _matrix_entry(parts, i, k), np.hypot(ii, ij))
-    a = np.arctan2(-sign * _matrix_entry(parts, j, k), _matrix_entry(parts, k, k))
-    c = np.arctan2(-sign * ij, ii)
-    return np.degrees(np.stack([a, b, c], axis=-1))
+    if _kernels is not None and q.dtype == np.float64 and q.size:  # the entries in one compiled pass, the same bits
+        q = np.ascontiguousarray(q)
+        entries = np.empty((6,) + q.shape[:-1])
+        _kernels.euler_entries(q, entries, q.size // 4, i, j, k, int(sign))
+        s_ik, ii, ij, s_jk, kk, s_ij = entries
+    else:
+        parts = _parts(q)
+        ii, ij = _matrix_entry(parts, i, i), _matrix_entry(parts, i, j)
+        s_ik, s_jk, kk = sign * _matrix_entry(parts, i, k), -sign * _matrix_entry(parts, j, k), _matrix_entry(parts, k, k)
+        s_ij = -sign * ij
+    out = np.empty(q.shape[:-1] + (3,))
+    np.degrees(np.arctan2(s_jk, kk), out=out[..., 0])
+    np.degrees(np.arctan2(s_ik, np.hypot(ii, ij)), out=out[..., 1])
+    np.degrees(np.arctan2(s_ij, ii), out=out[..., 2])
+    return out
 
 
 def quat_to_euler(
