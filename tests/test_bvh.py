@@ -1,6 +1,7 @@
 """BVH reading and writing on real clips, with bvhio as an independent oracle."""
 
 import re
+import warnings
 
 import bvhio
 import numpy as np
@@ -189,6 +190,17 @@ def test_writer_refuses_nan(sample_clip):
     positions[3, 0, 1] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         format_bvh(motion.replace(local_positions=positions))
+    # Infinities too, and two that cancel in a sum; huge finite numbers whose sum overflows are written.
+    rotations = motion.local_rotations.copy()
+    rotations[2, 1, 0], rotations[5, 2, 3] = np.inf, -np.inf
+    with pytest.raises(ValueError, match="infinite"):
+        format_bvh(motion.replace(local_rotations=rotations))
+    from mocap_exaggerate.io.bvh import _finite
+
+    positions[3, 0, 1] = positions[4, 0, 1] = 1.7e308
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (the sum's overflow is not the user's business)
+        assert _finite(positions) and not _finite(rotations)
 
 
 @pytest.mark.parametrize("decimals", [0, 1, 4, 6, 9])

@@ -846,10 +846,18 @@ def format_bvh(motion: Motion, *, positions: str = "standard") -> bytes:
     return b"".join(iter_bvh(motion, positions=positions))
 
 
+def _finite(values: np.ndarray) -> bool:
+    """Whether every value is finite: their sum is (one pass, no temporary), else each is (a sum of finite
+    values past 1.8e308 is not)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = np.sum(values)
+    return bool(np.isfinite(total)) or bool(np.all(np.isfinite(values)))
+
+
 def iter_bvh(motion: Motion, *, positions: str = "standard"):
     """The file as consecutive pieces of bytes (the header, then blocks of frames); see `format_bvh`."""
     check_bvh_positions(positions)
-    if not (np.all(np.isfinite(motion.local_positions)) and np.all(np.isfinite(motion.local_rotations))):
+    if not all(_finite(values) for values in (motion.local_positions, motion.local_rotations)):
         raise ValueError("motion has NaN or infinite values; refusing to write them")
     yield _format_header(motion).encode("utf-8")
     yield from _motion_lines(motion, _BLOCK_FRAMES, positions)
