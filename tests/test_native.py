@@ -173,6 +173,7 @@ pos, links = np.zeros((rows, 4, 3)), np.zeros((rows, 3, 3))
 parents = np.array([-1, 0, 1, 2], dtype=np.int64)
 follow, out = np.zeros((50_000, 3, 3)), np.zeros((50_000, 3, 3))
 ends = np.array([0, 1], dtype=np.int64)
+was, turned = np.ones((rows, 4, 3)), np.zeros((rows, 4, 4))
 stop = False
 
 def flip():  # the index arrays changed again and again while the loops run with the GIL let go
@@ -187,7 +188,8 @@ try:
         for call in (lambda: bvh._compiled.format_columns(table, table, picks, rows, 3, 3, 6),
                      lambda: kernels.chain_add(pos, parents, links, rows, 4),
                      lambda: kernels.springs(follow, out, ends, ends[::-1].copy(), 50_000, 3, 2, 0.01, 1, 100.0,
-                                             10.0, 1.0)):
+                                             10.0, 1.0),
+                     lambda: kernels.single_turns(was, was, turned, turned, ends, ends, ends, rows, 4, 2)):
             try:
                 call()
             except ValueError:
@@ -207,3 +209,30 @@ def test_index_arrays_changed_by_another_thread_never_send_a_loop_out_of_bounds(
     done = subprocess.run([sys.executable, "-c", _CHANGED_UNDER], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, f"exit {done.returncode}: {done.stderr[-2000:]}"
     assert done.stdout.strip() in ("survived", "not built")
+
+
+def test_joints_turned_by_one_link_are_numpys_bits_and_bad_joints_are_refused():
+    """`single_turns` (orientation recovery's joints turned by a single link) against the NumPy expression it
+    replaces, byte for byte, with a link of no length and one turned to face the other way among them."""
+    from mocap_exaggerate.core.rotations import quat_between, quat_mul, quat_normalize
+
+    if native.kernels is None:
+        pytest.skip("the compiled loops were not built (or MOCAP_EXAGGERATE_NUMPY_ONLY is set)")
+    frames, joints = 500, 9
+    rng = np.random.default_rng(12)
+    was, now = rng.normal(size=(frames, joints, 3)), rng.normal(size=(frames, joints, 3))
+    turned = quat_normalize(rng.normal(size=(frames, joints, 4)))
+    start, end, joint = np.array([0, 1, 2, 4, 6]), np.array([1, 2, 3, 5, 8]), np.array([0, 1, 2, 4, 6])
+    was[3, 2] = was[3, 1]  # no length: the identity turn
+    now[4, 1] = now[4, 0] - 2.0 * (was[4, 1] - was[4, 0])  # opposite: a half turn
+    expected = np.zeros((frames, joints, 4))
+    turn = quat_between(was[:, end] - was[:, start], now[:, end] - now[:, start])
+    expected[:, joint] = quat_normalize(quat_mul(turn, turned[:, joint]))
+    got = np.zeros((frames, joints, 4))
+    native.kernels.single_turns(was, now, turned, got, start, end, joint, frames, joints, len(joint))
+    assert got.tobytes() == expected.tobytes()
+    for bad in (np.array([0, 1, 2, 4, joints]), np.array([0, 1, -1, 4, 6])):
+        with pytest.raises(ValueError, match="out of range"):
+            native.kernels.single_turns(was, now, turned, got, start, bad, joint, frames, joints, len(joint))
+    with pytest.raises(ValueError):  # an array of the wrong size
+        native.kernels.single_turns(was[:-1], now, turned, got, start, end, joint, frames, joints, len(joint))

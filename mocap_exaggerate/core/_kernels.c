@@ -38,6 +38,11 @@
  *     the five entries of the rotation matrices of count unit quaternions q (count, 4) float64 that
  *     rotations._euler_from_quat reads, made as _matrix_entry makes them, into out (6, count): sign R[i, k],
  *     R[i, i], R[i, j], -sign R[j, k], R[k, k], -sign R[i, j] (sign +1 or -1: exact).
+ * single_turns(was, now, turned, out, start, end, joint, frames, joints, count)
+ *     orientation recovery's joints turned by a single link (stages/orient.py): for each k < count, out[f,
+ *     joint[k]] = quat_normalize(quat_mul(quat_between(was[f, end[k]] - was[f, start[k]], now[f, end[k]] -
+ *     now[f, start[k]]), turned[f, joint[k]])); was and now (F, J, 3), turned and out (F, J, 4) float64,
+ *     start, end and joint (count,) int64 joints.
  * unit_track(q, out, frames, joints, joint)
  *     joint's track of quaternions q (F, joints, 4) float64, into out (F, 4), as the GLB writes it: rotations.quat_unroll (each dot product summed
  *     left to right, as np.sum sums four) and divided by vector_norm's length; NumPy's bits.
@@ -745,6 +750,62 @@ static PyObject *euler_entries(PyObject *self, PyObject *args) {
     return finish(views, got, bad);
 }
 
+/* Each joint turned by a single link: its captured orientation turned by the smallest turn carrying the link's
+ * captured direction onto its new one, made unit (orient.recover_orientations' fit). */
+static PyObject *single_turns(PyObject *self, PyObject *args) {
+    PyObject *objects[7];
+    Py_ssize_t frames, joints, count;
+    if (!PyArg_ParseTuple(args, "OOOOOOOnnn", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &objects[5], &objects[6], &frames, &joints, &count))
+        return NULL;
+    if (!counts_fit(frames, joints, "single_turns")) return NULL;
+    if (count < 0 || count > joints) {
+        PyErr_SetString(PyExc_ValueError, "single_turns: bad count");
+        return NULL;
+    }
+    Py_buffer views[7];
+    const Py_ssize_t counts[7] = {frames * joints * 3, frames * joints * 3, frames * joints * 4, frames * joints * 4,
+                                  count, count, count};
+    const char *names[7] = {"was", "now", "turned", "out", "start", "end", "joint"};
+    int got = get_arrays(objects, views, "ddddqqq", "rrrwrrr", counts, names, 7);
+    int bad = got < 7;
+    int64_t *index[3] = {NULL, NULL, NULL};
+    for (int n = 0; n < 3 && !bad; n++) {
+        index[n] = items_copy(&views[4 + n], count);
+        bad = index[n] == NULL;
+        for (Py_ssize_t k = 0; k < count && !bad; k++) bad = index[n][k] < 0 || index[n][k] >= joints;
+        if (bad && index[n] != NULL) PyErr_SetString(PyExc_ValueError, "single_turns: a joint out of range");
+    }
+    if (!bad) {
+        const double *was = (const double *)views[0].buf, *now = (const double *)views[1].buf;
+        const double *turned = (const double *)views[2].buf;
+        double *out = (double *)views[3].buf;
+        const int64_t *start = index[0], *end = index[1], *joint = index[2];
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t f = 0; f < frames; f++) {
+            const double *w = was + f * joints * 3, *n = now + f * joints * 3, *t = turned + f * joints * 4;
+            double *o = out + f * joints * 4;
+            for (Py_ssize_t k = 0; k < count; k++) {
+                const double *w0 = w + start[k] * 3, *w1 = w + end[k] * 3, *n0 = n + start[k] * 3, *n1 = n + end[k] * 3;
+                const double u[3] = {w1[0] - w0[0], w1[1] - w0[1], w1[2] - w0[2]};
+                const double v[3] = {n1[0] - n0[0], n1[1] - n0[1], n1[2] - n0[2]};
+                double turn[4], q[4];
+                quat_between(u, v, turn);
+                quat_mul(turn, t + joint[k] * 4, q);
+                const double size = norm4(q);
+                double *r = o + joint[k] * 4;
+                r[0] = q[0] / size;
+                r[1] = q[1] / size;
+                r[2] = q[2] / size;
+                r[3] = q[3] / size;
+            }
+        }
+        Py_END_ALLOW_THREADS
+    }
+    for (int n = 0; n < 3; n++) PyMem_Free(index[n]);
+    return finish(views, got, bad);
+}
+
 static PyMethodDef methods[] = {
     {"local_from_world", local_from_world, METH_VARARGS,
      "local_from_world(parents, world_rot, world_pos, local_rot, local_pos, frames, joints): world to local."},
@@ -762,6 +823,8 @@ static PyMethodDef methods[] = {
      "chain_add(pos, parents, links, frames, joints): positions rebuilt down the hierarchy from their links."},
     {"euler_entries", euler_entries, METH_VARARGS,
      "euler_entries(q, out, count, i, j, k, sign): the matrix entries Euler angles are read from."},
+    {"single_turns", single_turns, METH_VARARGS,
+     "single_turns(was, now, turned, out, start, end, joint, frames, joints, count): joints turned by one link."},
     {"unit_track", unit_track, METH_VARARGS,
      "unit_track(q, out, frames, joints, joint): a joint's quaternion track unrolled into one hemisphere and of "
      "unit length."},

@@ -157,6 +157,10 @@ def recover_orientations(
             else:
                 kept.append(j)
 
+    single = np.array([single_from, single_to, single_joint], dtype=np.int64).reshape(3, -1)
+    compiled = _kernels is not None and all(a.dtype == np.float64 and a.flags.c_contiguous
+                                            for a in (source_pos, new_pos, source_rot, world))
+
     def fit(rows: slice, placed: np.ndarray = new_pos) -> None:  # each frame on its own: halves on two cores
         part = world[rows]
         was, now, turned = source_pos[rows], placed[rows], source_rot[rows]
@@ -165,8 +169,9 @@ def recover_orientations(
             v = now[:, targets] - now[:, j : j + 1]
             part[:, j] = quat_mul(_fit_turn(u, v, centre), turned[:, j])
         part[:, kept] = turned[:, kept]
-        if single_joint:
-            # One vectorised call for every joint turned by a single link.
+        if single_joint and compiled:  # every joint turned by a single link, in one compiled pass: the same bits
+            _kernels.single_turns(was, now, turned, part, *single, len(part), skeleton.num_joints, len(single_joint))
+        elif single_joint:  # one vectorised call for them all
             turn = quat_between(was[:, single_to] - was[:, single_from], now[:, single_to] - now[:, single_from])
             part[:, single_joint] = quat_normalize(quat_mul(turn, turned[:, single_joint]))
         if pins is not None and len(pins[0]):
