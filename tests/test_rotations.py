@@ -167,6 +167,25 @@ def test_sum_of_three_is_numpys_sum_bit_for_bit():
 
 
 @pytest.mark.parametrize("length", [1, 2, 3, 4, 7, 8])
+def test_sum_over_the_last_axis_is_numpys_sum_bit_for_bit(length):
+    # Dot products across the stages: NumPy's bits, the sign of a zero too (NumPy adds to +0.0, so a sum of
+    # -0.0 alone is +0.0), on any layout, with infinities that cancel.
+    from mocap_exaggerate.core.rotations import sum_last
+
+    rng = np.random.default_rng(709)
+    values = rng.normal(size=(3000, length)) * 10.0 ** rng.integers(-20, 20, size=(3000, length))
+    values[::7] = -0.0
+    values[1::7, : max(length - 1, 1)] = -0.0
+    values[2::7, 0] = -values[2::7, -1]
+    values[4::11, 0], values[5::11, -1] = np.inf, -np.inf
+    for laid in (values, np.asfortranarray(values), values[::2], np.repeat(values, 2, axis=1)[:, ::2]):
+        ours, theirs = sum_last(laid), np.sum(laid, axis=-1)
+        assert np.array_equal(ours, theirs, equal_nan=True) and np.array_equal(np.signbit(ours), np.signbit(theirs))
+    stacked = values.reshape(100, 30, length).transpose(1, 0, 2)
+    assert sum_last(stacked, keepdims=True).tobytes() == np.sum(stacked, axis=-1, keepdims=True).tobytes()
+
+
+@pytest.mark.parametrize("length", [1, 2, 3, 4, 7, 8])
 def test_vector_norm_is_numpys_norm_bit_for_bit(length):
     # Every stage measures lengths with it: NumPy's own bits, on any layout (and whole blocks in the cache).
     from mocap_exaggerate.core.rotations import vector_norm

@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..core.native import by_frame_halves
-from ..core.rotations import vector_norm
+from ..core.rotations import sum_last, vector_norm
 
 __all__ = ["Capsule", "Part", "body_capsules", "limb_parts", "segment_closest", "CapturedSides", "penetrations",
            "inside_body"]
@@ -212,7 +212,7 @@ def _penetrations(positions: np.ndarray, capsules: list[Capsule], parts: list[Pa
                 if reference is not None:
                     side = reference.side(part, capsule, rows)
                     unit = axis / np.maximum(vector_norm(axis, keepdims=True), 1e-12)
-                    side = side - np.sum(side * unit, axis=-1, keepdims=True) * unit
+                    side = side - sum_last(side * unit, keepdims=True) * unit
                     # (the captured side where the part is near the axis, its own way out where it is
                     # clearly on one side: pushed back across the body to the captured side it went
                     # round and round)

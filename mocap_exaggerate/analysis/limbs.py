@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.rotations import quat_inv, quat_rotate, vector_norm
+from ..core.rotations import quat_inv, quat_rotate, sum_last, vector_norm
 from ..core.skeleton import Skeleton
 from ..core.timing import smootherstep
 
@@ -320,10 +320,17 @@ def torso_joints(skeleton: Skeleton, limbs: dict) -> np.ndarray:
 
 def offset_from_line(base: np.ndarray, middle: np.ndarray, end: np.ndarray) -> np.ndarray:
     """(F, 3) the middle joint's offset from the base-to-end line: where the chain bends, and how far."""
+    return _off_line(middle - base, _unit_line(base, end))
+
+
+def _unit_line(base: np.ndarray, end: np.ndarray) -> np.ndarray:
     line = end - base
-    line = line / np.maximum(vector_norm(line), 1e-12)[:, None]
-    away = middle - base
-    return away - np.sum(away * line, axis=-1, keepdims=True) * line
+    return line / np.maximum(vector_norm(line), 1e-12)[:, None]
+
+
+def _off_line(vectors: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """``vectors`` (F, 3) less their part along the unit ``line`` (F, 3) (the dot products in ``np.sum``'s order)."""
+    return vectors - sum_last(vectors * line)[:, None] * line
 
 
 def hinge_pole(chain: np.ndarray, base_rotation: np.ndarray) -> np.ndarray | None:
@@ -351,9 +358,8 @@ def behind_line(positions: np.ndarray, joints, pole: np.ndarray) -> tuple[np.nda
     """How far a limb's middle joint is behind its base-to-end line (F,) (negative: in front, the way
     ``pole`` (F, 3) points), and the unit way to the front across the line (F, 3)."""
     base, middle, end = (positions[:, j] for j in joints)
-    offset = offset_from_line(base, middle, end)
-    line = end - base
-    line = line / np.maximum(vector_norm(line, keepdims=True), 1e-12)
-    side = pole - np.sum(pole * line, axis=-1, keepdims=True) * line
+    line = _unit_line(base, end)
+    offset = _off_line(middle - base, line)
+    side = _off_line(pole, line)
     side = side / np.maximum(vector_norm(side, keepdims=True), 1e-12)
-    return -np.sum(offset * side, axis=-1), side
+    return -sum_last(offset * side), side

@@ -166,7 +166,7 @@ def quat_slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarra
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     t = np.asarray(t, dtype=np.float64)[..., None]
-    dot = np.sum(a * b, axis=-1, keepdims=True)
+    dot = sum_last(a * b, keepdims=True)
     sign = np.where(dot < 0.0, -1.0, 1.0)
     dot = np.minimum(np.abs(dot), 1.0)
     angle = np.arccos(dot)
@@ -212,7 +212,7 @@ def quat_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
     nu = vector_norm(u, keepdims=True)
     nv = vector_norm(v, keepdims=True)
-    q = np.concatenate([cross(u, v), nu * nv + np.sum(u * v, axis=-1, keepdims=True)], axis=-1)
+    q = np.concatenate([cross(u, v), nu * nv + sum_last(u * v, keepdims=True)], axis=-1)
     norm = vector_norm(q, keepdims=True)
     tiny = 1e-12 * np.maximum(nu * nv, 1e-300)
     opposite = (norm <= tiny) & (nu * nv > 0)
@@ -547,6 +547,20 @@ def _sum3(values: np.ndarray) -> np.ndarray:
     """``values.sum(axis=-1)`` over a last axis of three, in NumPy's order (first two, then the
     third: the same bits), at a third of its time (a reduction over three is mostly overhead)."""
     return (values[..., 0] + values[..., 1]) + values[..., 2]
+
+
+def sum_last(values: np.ndarray, *, keepdims: bool = False) -> np.ndarray:
+    """``np.sum(values, axis=-1, keepdims=keepdims)``, the same bits: over a last axis of fewer than eight
+    NumPy adds the values one after the other to 0.0, as this does by element-wise passes (a reduction over
+    three or four is mostly overhead: half its time). Longer axes go to NumPy."""
+    values = np.asarray(values)
+    if not 1 < values.shape[-1] < 8 or values.dtype != np.float64:
+        return np.sum(values, axis=-1, keepdims=keepdims)
+    total = values[..., 0] + values[..., 1]
+    for i in range(2, values.shape[-1]):
+        total += values[..., i]
+    total += 0.0  # (NumPy starts from +0.0: a sum of only -0.0 is +0.0; every other sum is as it was)
+    return total[..., None] if keepdims else total
 
 
 def _fill_from_unlocked(values: np.ndarray, locked: np.ndarray, before: np.ndarray, after) -> np.ndarray:

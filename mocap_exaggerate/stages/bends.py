@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.native import by_frame_halves
-from ..core.rotations import vector_norm
+from ..core.rotations import sum_last, vector_norm
 from ..core.timing import smootherstep
 
 __all__ = ["keep_bends", "keep_bends_on_rubber"]
@@ -49,20 +49,20 @@ def _keep_bends(positions: np.ndarray, captured: np.ndarray, hinges, margin: flo
         bent = captured[:, middle] - captured[:, base]
         cap_line = captured[:, end] - captured[:, base]
         cap_line = cap_line / np.maximum(vector_norm(cap_line, keepdims=True), 1e-300)
-        side = bent - np.sum(bent * cap_line, axis=-1, keepdims=True) * cap_line
+        side = bent - sum_last(bent * cap_line, keepdims=True) * cap_line
         length = vector_norm(captured[:, middle] - captured[:, base]) + \
             vector_norm(captured[:, end] - captured[:, middle])
         if len(hinge) > 3:  # a foot: knees bend toward the toes, which says so even on a straight leg
             toes = captured[:, hinge[3]] - captured[:, end]
-            toes = toes - np.sum(toes * cap_line, axis=-1, keepdims=True) * cap_line
+            toes = toes - sum_last(toes * cap_line, keepdims=True) * cap_line
             toes = toes / np.maximum(vector_norm(toes, keepdims=True), 1e-300)
             side = side + 0.1 * length[:, None] * toes
-        side = side - np.sum(side * along, axis=-1, keepdims=True) * along
+        side = side - sum_last(side * along, keepdims=True) * along
         size = vector_norm(side)
         side = side / np.maximum(size, 1e-300)[:, None]
         offset = out[:, middle] - out[:, base]
-        offset = offset - np.sum(offset * along, axis=-1, keepdims=True) * along
-        s = np.sum(offset * side, axis=-1)
+        offset = offset - sum_last(offset * along, keepdims=True) * along
+        s = sum_last(offset * side)
         floor = margin * length
         # A soft clamp: unchanged from 2 floor up, never below 0 (behind the line).
         low = s < 2.0 * floor

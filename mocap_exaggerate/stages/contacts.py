@@ -42,7 +42,7 @@ import numpy as np
 from ..analysis.branches import incoming_joint, minor_branches, rider_joints, rubber_groups
 from ..analysis.limbs import Limb, behind_line, hinge_pole, offset_from_line
 from ..core.errors import ConfigError, check_choice, check_flag, check_number
-from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp, vector_norm
+from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp, sum_last, vector_norm
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
 from ..core.timing import check_duration, gaussian_average, parse_duration, parse_frame, smootherstep, spread_max
@@ -686,7 +686,7 @@ def _solve_middle(base, upper, lower, target, side, soft) -> np.ndarray:
     direction = reach / np.maximum(distance, tiny)[:, None]
     # The side projected across the new line (not turned onto it: a turn is undefined where the line
     # swings past a half turn, a projection is not).
-    side = side - np.sum(side * direction, axis=-1, keepdims=True) * direction
+    side = side - sum_last(side * direction, keepdims=True) * direction
     side_len = vector_norm(side)
     fallback = np.cross(direction, np.eye(3)[np.argmin(np.abs(direction), axis=-1)])
     side = np.where((side_len > tiny)[:, None], side, fallback)

@@ -42,6 +42,7 @@ from ..core.rotations import (
     quat_pow,
     quat_rotate,
     quat_slerp,
+    sum_last,
     vector_norm,
 )
 from ..core.timing import gaussian_average, smootherstep, step_gain
@@ -317,9 +318,9 @@ def curve_frames(world: np.ndarray, positions: np.ndarray, hierarchy: SubjointHi
             axis = last / np.maximum(vector_norm(last, keepdims=True), 1e-300)
             gap = quat_mul(out[part, ends], quat_inv(frame))
             sign = np.where(gap[..., 3] < 0.0, -1.0, 1.0)  # q and -q are one turn: take the one within half a turn
-            twisted = 2.0 * np.arctan2(sign * np.sum(gap[..., :3] * axis, axis=-1), np.abs(gap[..., 3]))
+            twisted = 2.0 * np.arctan2(sign * sum_last(gap[..., :3] * axis), np.abs(gap[..., 3]))
             pointing = quat_rotate(gap, axis)
-            fold = np.sum(pointing * axis, axis=-1) / np.maximum(vector_norm(pointing), 1e-300)
+            fold = sum_last(pointing * axis) / np.maximum(vector_norm(pointing), 1e-300)
             angle[part] = twisted * (smootherstep((fold - _FOLDED) / (_UNFOLDED - _FOLDED))
                                      * smootherstep((np.pi - np.abs(twisted)) / (np.pi - _TWIST_FADE)))
 
