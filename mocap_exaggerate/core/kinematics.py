@@ -16,7 +16,7 @@ from .native import kernels as _kernels  # the compiled loops, where built (core
 from .rotations import CACHE_ELEMENTS, quat_inv, quat_mul, quat_rotate
 
 __all__ = ["forward_kinematics", "local_from_world", "parent_rotations", "rest_positions", "frame_blocks", "cache_blocks",
-           "CACHE_ELEMENTS"]
+           "consecutive", "CACHE_ELEMENTS"]
 
 
 def forward_kinematics(
@@ -103,6 +103,15 @@ def cache_blocks(frames: int, per_frame: int):
     per-frame work then stays in the cache instead of streaming whole clips through memory (world-to-local
     on 100,000 frames of 95 joints took five times as long in blocks of 1,024 frames)."""
     return frame_blocks(frames, max(CACHE_ELEMENTS // max(per_frame, 1), 16))
+
+
+def consecutive(indices: np.ndarray) -> np.ndarray | slice:
+    """``indices`` as a slice where they are consecutive (a limb's rubber chain is), else as they are: an
+    array indexed by it is a view, changed in place, not gathered and put back."""
+    indices = np.asarray(indices)
+    if indices.ndim == 1 and len(indices) and np.array_equal(indices, np.arange(indices[0], indices[0] + len(indices))):
+        return slice(int(indices[0]), int(indices[0]) + len(indices))
+    return indices
 
 
 def rest_positions(parents: np.ndarray, offsets: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.kinematics import consecutive
 from ..core.native import by_frame_halves
 from ..core.rotations import sum_last, vector_norm
 from ..core.timing import smootherstep
@@ -95,14 +96,7 @@ def keep_bends_on_rubber(sub_positions: np.ndarray, hierarchy, captured: np.ndar
             continue
         upper = np.flatnonzero(hierarchy.link_child == middle)  # the middle joint and the sub-joints above it
         lower = np.flatnonzero((hierarchy.link_child == end) & ~hierarchy.is_original)
-        out[:, _run_of(upper)] += hierarchy.fraction[upper][None, :, None] * shift[:, None]
-        out[:, _run_of(lower)] += (1.0 - hierarchy.fraction[lower])[None, :, None] * shift[:, None]
+        out[:, consecutive(upper)] += hierarchy.fraction[upper][None, :, None] * shift[:, None]
+        out[:, consecutive(lower)] += (1.0 - hierarchy.fraction[lower])[None, :, None] * shift[:, None]
     return out
 
-
-def _run_of(joints: np.ndarray) -> np.ndarray | slice:
-    """``joints`` as a slice where they are consecutive (a link's sub-joints are): changed in place, not
-    gathered and put back."""
-    if len(joints) and np.array_equal(joints, np.arange(joints[0], joints[0] + len(joints))):
-        return slice(int(joints[0]), int(joints[0]) + len(joints))
-    return joints

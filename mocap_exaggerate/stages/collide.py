@@ -25,6 +25,7 @@ import numpy as np
 
 from ..analysis.body import CapturedSides, body_capsules, limb_parts, penetrations
 from ..analysis.limbs import behind_line
+from ..core.kinematics import consecutive
 from ..core.rotations import vector_norm
 from ..core.timing import end_ramp, gaussian_average, spread_max
 
@@ -329,7 +330,8 @@ def unbend_hinges(out: np.ndarray, hierarchy, limbs: dict, poles: dict[str, tupl
 def move_middle(out: np.ndarray, chain: np.ndarray, middle: int, move: np.ndarray) -> None:
     """Move a chain's middle joint by ``move (F, 3)`` (in place), its base and end staying: the sub-joints on
     its two links move by their share of the way (along the chain) from the base or the end to it."""
-    points = out[:, chain]
+    run = consecutive(chain)
+    points = out[:, run]
     steps = vector_norm(np.diff(points, axis=1))
     at = np.concatenate([np.zeros((len(out), 1)), np.cumsum(steps, axis=1)], axis=1)
     knee = int(np.flatnonzero(chain == middle)[0])
@@ -338,4 +340,4 @@ def move_middle(out: np.ndarray, chain: np.ndarray, middle: int, move: np.ndarra
                      where=(at[:, -1:] - at[:, knee:knee + 1]) > 1e-12)
     weight = np.where(np.arange(len(chain)) <= knee, up, down)
     weight[:, 0] = weight[:, -1] = 0.0
-    out[:, chain] += weight[..., None] * move[:, None]
+    out[:, run] += weight[..., None] * move[:, None]

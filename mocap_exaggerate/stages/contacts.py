@@ -42,6 +42,7 @@ import numpy as np
 from ..analysis.branches import incoming_joint, minor_branches, rider_joints, rubber_groups
 from ..analysis.limbs import Limb, behind_line, hinge_pole, offset_from_line
 from ..core.errors import ConfigError, check_choice, check_flag, check_number
+from ..core.kinematics import consecutive
 from ..core.rotations import quat_between, quat_inv, quat_mul, quat_rotate, quat_slerp, sum_last, vector_norm
 from ..core.settings import Flag, setting
 from ..core.skeleton import Skeleton
@@ -959,9 +960,14 @@ def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, 
     frames = np.flatnonzero(np.any(np.abs(goal - end) > 0, axis=-1))
     if not len(frames):
         return
-    points = out[frames][:, chain]
+    run = consecutive(chain)
+    points = out[frames, run] if isinstance(run, slice) else out[frames][:, chain]
     if len(chain) != 3:
-        out[frames[:, None], chain[None, :]] = laplacian_deform(points, goal[frames], rest[chain])
+        deformed = laplacian_deform(points, goal[frames], rest[chain])
+        if isinstance(run, slice):
+            out[frames, run] = deformed
+        else:
+            out[frames[:, None], chain[None, :]] = deformed
         return
     middle = two_bone_ik(points[:, 0], points[:, 1], points[:, 2], goal[frames],
                          None if pole is None else pole[frames])
