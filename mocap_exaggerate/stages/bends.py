@@ -87,7 +87,7 @@ def keep_bends_on_rubber(sub_positions: np.ndarray, hierarchy, captured: np.ndar
     added to every frame of a hinge that moves anywhere.)
     """
     out = sub_positions if in_place else np.array(sub_positions, dtype=np.float64)
-    joints = out[:, hierarchy.original]
+    joints = np.take(out, hierarchy.original, axis=1)
     bent = keep_bends(joints, captured, hinges)
     for hinge in hinges:
         _, middle, end = hinge[:3]

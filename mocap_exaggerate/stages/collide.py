@@ -121,7 +121,7 @@ def keep_out(out: np.ndarray, hierarchy, limbs: dict, effectors: dict, body: Bod
     span = int(round(EASE * ramp))
     nothing = np.zeros(len(out))
     for _ in range(rounds):
-        found = penetrations(out[:, original], body.capsules, body.parts, reference=body.sides)
+        found = penetrations(np.take(out, original, axis=1), body.capsules, body.parts, reference=body.sides)
         moved = False
         for limb_name in body.limbs:
             limb = limbs[limb_name]

@@ -918,7 +918,7 @@ def constrain(
             unbend_hinges(out, hierarchy, limbs, hinges, chain_of)  # what the floor's lifts bent back
             if floor:
                 lift_body()
-            if round_ >= 1 and (shape is None or not deeper_than_captured(out[:, original], shape)):
+            if round_ >= 1 and (shape is None or not deeper_than_captured(np.take(out, original, axis=1), shape)):
                 break
     elif floor:
         lift_ends()

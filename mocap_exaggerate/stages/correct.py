@@ -54,7 +54,7 @@ import numpy as np
 
 from ..analysis.limbs import limb_hinges
 from ..core.errors import ConfigError, check_flag, check_number
-from ..core.kinematics import cache_blocks
+from ..core.kinematics import cache_blocks, link_vectors
 from ..core.native import kernels as _kernels  # the compiled loops, where built (core/native.py)
 from ..core.rotations import vector_norm
 from ..core.settings import Flag, setting
@@ -186,7 +186,7 @@ def _limits(max_stretch, rest_lengths: np.ndarray) -> np.ndarray:
 
 
 def _excess(world_pos, parents, rest_lengths, max_stretch):
-    vec = world_pos[:, 1:] - world_pos[:, parents[1:]]
+    vec = link_vectors(world_pos, parents)
     length = vector_norm(vec)
     x = np.maximum(0.0, length - _limits(max_stretch, rest_lengths))
     return x, vec, length
@@ -340,11 +340,11 @@ def floor_squash(world_pos: np.ndarray, parents: np.ndarray, rest_lengths: np.nd
     links = rest_lengths[1:]
     if min_length <= 0 or not len(links) or links.max(initial=0.0) <= 0:
         return out, 0
-    vec = out[:, 1:] - out[:, parents[1:]]
+    vec = link_vectors(out, parents)
     length = vector_norm(vec)
     full = links
     if captured is not None:
-        full = np.minimum(links, vector_norm(captured[:, 1:] - captured[:, parents[1:]]))
+        full = np.minimum(links, vector_norm(link_vectors(captured, parents)))
     room = (1.0 - min_length) * full
     knee = _KNEE * room
     counted = links > 1e-3 * links.max()

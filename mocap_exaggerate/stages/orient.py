@@ -129,7 +129,7 @@ def recover_orientations(
     original = hierarchy.original
     rigid = hierarchy.rigid
     sub_pos = np.array(sub_pos, dtype=np.float64)
-    new_pos = sub_pos[:, original]
+    new_pos = np.take(sub_pos, original, axis=1)
     frames = sub_pos.shape[0]
     world = np.zeros((frames, skeleton.num_joints, 4))
     world[..., 3] = 1.0

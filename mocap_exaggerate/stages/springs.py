@@ -324,7 +324,7 @@ def simulate_springs(
         return out
     substeps = substeps_for(frame_time, stiffness, link_stiffness, degree)
     link_stiffness = stable_link_stiffness(frame_time, link_stiffness, degree, substeps)
-    follow = np.ascontiguousarray(positions[:, members])
+    follow = np.take(positions, members, axis=1)
     kernel = (_integrate_compiled if _kernels is not None else _integrate_vectorised) if compiled else _integrate
     suspended = kernel(follow, link_a, link_b, float(frame_time), substeps, float(stiffness),
                        float(link_stiffness), float(damping))
@@ -424,9 +424,9 @@ def _limit_block(positions: np.ndarray, before: np.ndarray, parents: np.ndarray,
                  rest: np.ndarray, way: np.ndarray, most: float, least: float = 0.0) -> None:
     """`limit_stretch` on a block of frames, in place."""
     ends = np.flatnonzero(limited) + 1  # (only the limited links are measured: every other link's move is its parent's)
-    vectors = positions[:, ends] - positions[:, parents[ends]]
+    vectors = np.take(positions, ends, axis=1) - np.take(positions, parents[ends], axis=1)
     length = np.sqrt(np.einsum("fjc,fjc->fj", vectors, vectors))
-    had = vector_norm(before[:, ends] - before[:, parents[ends]])
+    had = vector_norm(np.take(before, ends, axis=1) - np.take(before, parents[ends], axis=1))
     knee = np.maximum(had, rest + LIMIT_KNEE * way)
     top = np.maximum(most * rest, knee + LIMIT_ROOM * way)
     new_length = soft_limit(length, knee, top)

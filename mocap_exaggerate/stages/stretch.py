@@ -29,6 +29,7 @@ import numpy as np
 from ..analysis.limbs import limb_length
 from ..analysis.strikes import CANDIDATE_REACH, Candidate, strike_candidates
 from ..core.errors import ConfigError, check_number
+from ..core.kinematics import link_vectors
 from ..core.rotations import quat_between, quat_rotate, vector_norm
 from ..core.settings import Flag, setting
 from ..core.timing import parse_duration, parse_frame
@@ -461,8 +462,8 @@ def apply_stretches(
             "original": before[span, end].round(6).tolist(), "exaggerated": world_pos[span, end].round(6).tolist(),
         })
 
-    lengths_before = vector_norm(before[:, 1:] - before[:, skeleton.parents[1:]])
-    lengths_after = vector_norm(world_pos[:, 1:] - world_pos[:, skeleton.parents[1:]])
+    lengths_before = vector_norm(link_vectors(before, skeleton.parents))
+    lengths_after = vector_norm(link_vectors(world_pos, skeleton.parents))
     factors = np.ones((frames_total, skeleton.num_joints))
     factors[:, 1:] = np.divide(lengths_after, lengths_before, out=np.ones_like(lengths_after),
                                where=lengths_before > 1e-12)
