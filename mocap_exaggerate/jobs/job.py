@@ -349,6 +349,8 @@ def convert(
 
     timings: dict[str, float] = {}
     motion, report = read_clip(source, config.input, name=label, data=data)
+    if config.output.skeleton != "original":  # (only the original skeleton's channels are written near the read
+        motion = motion.replace(euler_hint=None)  # angles: elsewhere they are 24 bytes a joint a frame for nothing)
     timings["read"] = time.perf_counter() - started
     warnings = list(report.warnings) + changed
     if not glb and not to_stream and (skin is not None or config.glb.skin):
