@@ -189,7 +189,9 @@ try:
                      lambda: kernels.chain_add(pos, parents, links, rows, 4),
                      lambda: kernels.springs(follow, out, ends, ends[::-1].copy(), 50_000, 3, 2, 0.01, 1, 100.0,
                                              10.0, 1.0),
-                     lambda: kernels.single_turns(was, was, turned, turned, ends, ends, ends, rows, 4, 2)):
+                     lambda: kernels.single_turns(was, was, turned, turned, ends, ends, ends, rows, 4, 2),
+                     lambda: kernels.rigid_branches(turned, was, turned, was, parents[1:3].copy() + 1, ends, rows, 4,
+                                                    2)):
             try:
                 call()
             except ValueError:
@@ -236,3 +238,29 @@ def test_joints_turned_by_one_link_are_numpys_bits_and_bad_joints_are_refused():
             native.kernels.single_turns(was, now, turned, got, start, bad, joint, frames, joints, len(joint))
     with pytest.raises(ValueError):  # an array of the wrong size
         native.kernels.single_turns(was[:-1], now, turned, got, start, end, joint, frames, joints, len(joint))
+
+
+def test_rigid_branches_are_numpys_bits_and_bad_joints_are_refused():
+    """`rigid_branches` (a rigid branch placed under its recovered parent by its captured local transforms)
+    against the NumPy loop it replaces, byte for byte, a rider on a rider among them."""
+    from mocap_exaggerate.core.rotations import quat_mul, quat_normalize, quat_rotate
+
+    if native.kernels is None:
+        pytest.skip("the compiled loops were not built (or MOCAP_EXAGGERATE_NUMPY_ONLY is set)")
+    frames, joints = 400, 8
+    rng = np.random.default_rng(13)
+    world = quat_normalize(rng.normal(size=(frames, joints, 4)))
+    positions = rng.normal(size=(frames, joints, 3))
+    local_rot, local_pos = quat_normalize(rng.normal(size=(frames, joints, 4))), rng.normal(size=(frames, joints, 3))
+    placed, parents = np.array([2, 3, 6, 7]), np.array([1, 2, 0, 6])  # 3 rides on 2, 7 on 6
+    expected_world, expected_positions = world.copy(), positions.copy()
+    for j, p in zip(placed, parents):
+        expected_world[:, j] = quat_mul(expected_world[:, p], local_rot[:, j])
+        expected_positions[:, j] = expected_positions[:, p] + quat_rotate(expected_world[:, p], local_pos[:, j])
+    native.kernels.rigid_branches(world, positions, local_rot, local_pos, placed, parents, frames, joints, len(placed))
+    assert world.tobytes() == expected_world.tobytes() and positions.tobytes() == expected_positions.tobytes()
+    for bad_placed, bad_parents in ((np.array([2, 3, 6, joints]), parents), (placed, np.array([1, 3, 0, 6])),
+                                    (np.array([0, 3, 6, 7]), np.array([-1, 2, 0, 6]))):
+        with pytest.raises(ValueError, match="out of range or after its parent"):
+            native.kernels.rigid_branches(world, positions, local_rot, local_pos, bad_placed, bad_parents, frames,
+                                          joints, len(placed))

@@ -43,6 +43,12 @@
  *     joint[k]] = quat_normalize(quat_mul(quat_between(was[f, end[k]] - was[f, start[k]], now[f, end[k]] -
  *     now[f, start[k]]), turned[f, joint[k]])); was and now (F, J, 3), turned and out (F, J, 4) float64,
  *     start, end and joint (count,) int64 joints.
+ * rigid_branches(world, positions, local_rot, local_pos, joints, parents, frames, count, placed)
+ *     orientation recovery's rigid branches (stages/orient.py): for each listed joint j, in order, world[f, j] =
+ *     quat_mul(world[f, p], local_rot[f, j]) and positions[f, j] = positions[f, p] + quat_rotate(world[f, p],
+ *     local_pos[f, j]) with p = parents[k], the joint's parent (before it in the list or not rigid);
+ *     world and local_rot (F, J, 4), positions and local_pos (F, J, 3) float64, joints and parents (placed,)
+ *     int64 with parents[k] < joints[k].
  * unit_track(q, out, frames, joints, joint)
  *     joint's track of quaternions q (F, joints, 4) float64, into out (F, 4), as the GLB writes it: rotations.quat_unroll (each dot product summed
  *     left to right, as np.sum sums four) and divided by vector_norm's length; NumPy's bits.
@@ -806,6 +812,56 @@ static PyObject *single_turns(PyObject *self, PyObject *args) {
     return finish(views, got, bad);
 }
 
+/* Rigid branches placed under their recovered parents by their captured local transforms, joint after joint
+ * in the skeleton's order (orient.recover_orientations). */
+static PyObject *rigid_branches(PyObject *self, PyObject *args) {
+    PyObject *objects[6];
+    Py_ssize_t frames, joints, placed;
+    if (!PyArg_ParseTuple(args, "OOOOOOnnn", &objects[0], &objects[1], &objects[2], &objects[3], &objects[4],
+                          &objects[5], &frames, &joints, &placed))
+        return NULL;
+    if (!counts_fit(frames, joints, "rigid_branches")) return NULL;
+    if (placed < 0 || placed > joints) {
+        PyErr_SetString(PyExc_ValueError, "rigid_branches: bad count");
+        return NULL;
+    }
+    Py_buffer views[6];
+    const Py_ssize_t counts[6] = {frames * joints * 4, frames * joints * 3, frames * joints * 4, frames * joints * 3,
+                                  placed, placed};
+    const char *names[6] = {"world", "positions", "local_rot", "local_pos", "joints", "parents"};
+    int got = get_arrays(objects, views, "ddddqq", "wwrrrr", counts, names, 6);
+    int bad = got < 6;
+    int64_t *joint = bad ? NULL : items_copy(&views[4], placed);
+    int64_t *parent = bad || joint == NULL ? NULL : items_copy(&views[5], placed);
+    if (!bad) bad = joint == NULL || parent == NULL;
+    for (Py_ssize_t k = 0; k < placed && !bad; k++) {
+        bad = joint[k] < 1 || joint[k] >= joints || parent[k] < 0 || parent[k] >= joint[k];
+        if (bad) PyErr_SetString(PyExc_ValueError, "rigid_branches: a joint out of range or after its parent");
+    }
+    if (!bad) {
+        double *world = (double *)views[0].buf, *positions = (double *)views[1].buf;
+        const double *local_rot = (const double *)views[2].buf, *local_pos = (const double *)views[3].buf;
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t f = 0; f < frames; f++) {
+            double *rot = world + f * joints * 4, *pos = positions + f * joints * 3;
+            const double *lrot = local_rot + f * joints * 4, *lpos = local_pos + f * joints * 3;
+            for (Py_ssize_t k = 0; k < placed; k++) {
+                const int64_t j = joint[k], p = parent[k];
+                double turned[3];
+                quat_rotate(rot + p * 4, lpos + j * 3, turned);
+                quat_mul(rot + p * 4, lrot + j * 4, rot + j * 4);
+                pos[j * 3] = pos[p * 3] + turned[0];
+                pos[j * 3 + 1] = pos[p * 3 + 1] + turned[1];
+                pos[j * 3 + 2] = pos[p * 3 + 2] + turned[2];
+            }
+        }
+        Py_END_ALLOW_THREADS
+    }
+    PyMem_Free(joint);
+    PyMem_Free(parent);
+    return finish(views, got, bad);
+}
+
 static PyMethodDef methods[] = {
     {"local_from_world", local_from_world, METH_VARARGS,
      "local_from_world(parents, world_rot, world_pos, local_rot, local_pos, frames, joints): world to local."},
@@ -825,6 +881,9 @@ static PyMethodDef methods[] = {
      "euler_entries(q, out, count, i, j, k, sign): the matrix entries Euler angles are read from."},
     {"single_turns", single_turns, METH_VARARGS,
      "single_turns(was, now, turned, out, start, end, joint, frames, joints, count): joints turned by one link."},
+    {"rigid_branches", rigid_branches, METH_VARARGS,
+     "rigid_branches(world, positions, local_rot, local_pos, joints, parents, frames, joints, count): rigid "
+     "branches placed under their parents."},
     {"unit_track", unit_track, METH_VARARGS,
      "unit_track(q, out, frames, joints, joint): a joint's quaternion track unrolled into one hemisphere and of "
      "unit length."},

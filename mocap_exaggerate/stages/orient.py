@@ -186,12 +186,16 @@ def recover_orientations(
                      max(int(round(0.05 / source.frame_time)), 2))
 
     # Rigid branches: captured local transforms under the recovered parent.
-    for j in range(1, skeleton.num_joints):
-        if not rigid[j]:
-            continue
-        p = skeleton.parents[j]
-        world[:, j] = quat_mul(world[:, p], source.local_rotations[:, j])
-        new_pos[:, j] = new_pos[:, p] + quat_rotate(world[:, p], source.local_positions[:, j])
+    placed = np.flatnonzero(rigid[1:]) + 1
+    local_rot, local_pos = source.local_rotations, source.local_positions
+    if compiled and len(placed) and all(a.dtype == np.float64 and a.flags.c_contiguous for a in (local_rot, local_pos)):
+        _kernels.rigid_branches(world, new_pos, local_rot, local_pos, placed, skeleton.parents[placed].astype(np.int64),
+                                frames, skeleton.num_joints, len(placed))  # (in one pass: the same bits)
+    else:
+        for j in placed:
+            p = skeleton.parents[j]
+            world[:, j] = quat_mul(world[:, p], local_rot[:, j])
+            new_pos[:, j] = new_pos[:, p] + quat_rotate(world[:, p], local_pos[:, j])
     sub_pos[:, original] = new_pos
 
     # The rubber skeleton written out: a start joint on each cut link (see `link_starts`).
