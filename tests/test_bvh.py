@@ -190,7 +190,7 @@ def test_writer_refuses_nan(sample_clip):
     positions[3, 0, 1] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         format_bvh(motion.replace(local_positions=positions))
-    # Infinities too, and two that cancel in a sum; huge finite numbers whose sum overflows are written.
+    # Infinities too, and two that cancel in a sum; huge finite numbers whose sum overflows are finite.
     rotations = motion.local_rotations.copy()
     rotations[2, 1, 0], rotations[5, 2, 3] = np.inf, -np.inf
     with pytest.raises(ValueError, match="infinite"):

@@ -264,3 +264,15 @@ def test_rigid_branches_are_numpys_bits_and_bad_joints_are_refused():
         with pytest.raises(ValueError, match="out of range or after its parent"):
             native.kernels.rigid_branches(world, positions, local_rot, local_pos, bad_placed, bad_parents, frames,
                                           joints, len(placed))
+
+
+def test_consecutive_indices_are_a_slice_only_where_they_mean_one():
+    from mocap_exaggerate.core.kinematics import consecutive
+
+    assert consecutive(np.array([3, 4, 5]), 10) == slice(3, 6)
+    for odd in ([-3, -2, -1], [-1, 0], [8, 9, 10, 11], [3, 5, 6], [4, 3], []):
+        assert isinstance(consecutive(np.array(odd, dtype=np.int64), 10), np.ndarray)
+    assert isinstance(consecutive(np.array([True, False]), 10), np.ndarray)  # a mask stays a mask
+    values = np.arange(10.0)
+    for picked in ([2, 3, 4], [-2, -1], [7, 8, 9]):
+        assert np.array_equal(values[consecutive(np.array(picked), 10)], values[picked])

@@ -183,6 +183,9 @@ def test_sum_over_the_last_axis_is_numpys_sum_bit_for_bit(length):
         assert np.array_equal(ours, theirs, equal_nan=True) and np.array_equal(np.signbit(ours), np.signbit(theirs))
     stacked = values.reshape(100, 30, length).transpose(1, 0, 2)
     assert sum_last(stacked, keepdims=True).tobytes() == np.sum(stacked, axis=-1, keepdims=True).tobytes()
+    for other in (values.astype(np.float32), np.arange(3 * length).reshape(3, length)):  # NumPy's own, as it is
+        assert sum_last(other).tobytes() == np.sum(other, axis=-1).tobytes()
+    assert sum_last(np.float64(2.5)) == 2.5
 
 
 @pytest.mark.parametrize("length", [1, 2, 3, 4, 7, 8])

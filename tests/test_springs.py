@@ -224,6 +224,15 @@ def test_the_lag_stretches_a_link_softly_to_its_most_and_the_chain_below_follows
     assert np.allclose(limit_stretch(after, longer, CHAIN, rest, np.array([1, 2, 3, 4]), 2.0), after)
     # Links not swung are left alone.
     assert np.array_equal(limit_stretch(after, before, CHAIN, rest, np.array([1, 3]), 2.0), after)
+    # Only link 2 limited: the links below it, not limited themselves, follow its shortening exactly, and a
+    # branch off joint 1 (a tree: 0-1-2-3-4 and 1-5) does not move.
+    tree = np.array([-1, 0, 1, 2, 3, 1])
+    branched = np.concatenate([after, after[:, 1:2] + [1.0, 0.0, 0.0]], axis=1)
+    out = limit_stretch(branched, np.concatenate([before, before[:, 1:2] + [1.0, 0.0, 0.0]], axis=1), tree,
+                        np.concatenate([rest, [1.0]]), np.array([2]), 2.0)
+    shift = out[1, 2] - branched[1, 2]
+    assert shift[1] == pytest.approx(1.5 + 0.5 * np.tanh(3.0) - 3.0) and np.allclose(shift[[0, 2]], 0.0)
+    assert np.allclose(out[1, 3:5] - branched[1, 3:5], shift) and np.array_equal(out[:, [0, 1, 5]], branched[:, [0, 1, 5]])
 
 
 def test_the_lag_squashes_a_link_softly_to_its_floor_and_the_chain_below_follows():
@@ -308,4 +317,11 @@ def test_soft_limit_is_its_formula_in_any_memory_layout():
     column = value[:, :1]  # broadcast against the knee and top
     assert np.array_equal(soft_limit(column, knee, top)[:, 5], soft_limit(value[:, 0], knee[:, 5], top[:, 5]))
     assert soft_limit(0.5, 1.0, 2.0) == 0.5 and soft_limit(9.0, 1.0, 2.0) == pytest.approx(1.0 + np.tanh(8.0))
-    assert soft_limit(value, knee, top) is not value
+    kept = value.copy()
+    assert not np.shares_memory(soft_limit(value, knee, top), value) and np.array_equal(value, kept)
+    # Where the difference to the knee is NaN the formula's branch is taken, as it was: the value or the top,
+    # whichever is less, where the room is not a number; else NaN.
+    with np.errstate(invalid="ignore"):  # (inf - inf: NumPy's warning, as the formula gives it)
+        odd = soft_limit(np.array([0.5, 3.0, np.inf, -np.inf, np.nan]), np.array([np.nan, np.nan, np.inf, -np.inf, 1.0]),
+                         3.0)
+    assert np.array_equal(odd, [0.5, 3.0, 3.0, np.nan, np.nan], equal_nan=True)

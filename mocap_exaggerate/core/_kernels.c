@@ -42,7 +42,8 @@
  *     orientation recovery's joints turned by a single link (stages/orient.py): for each k < count, out[f,
  *     joint[k]] = quat_normalize(quat_mul(quat_between(was[f, end[k]] - was[f, start[k]], now[f, end[k]] -
  *     now[f, start[k]]), turned[f, joint[k]])); was and now (F, J, 3), turned and out (F, J, 4) float64,
- *     start, end and joint (count,) int64 joints.
+ *     start, end and joint (count,) int64 joints (joint without repeats, out not turned: as NumPy's expression,
+ *     which reads every turned orientation before it writes one).
  * rigid_branches(world, positions, local_rot, local_pos, joints, parents, frames, count, placed)
  *     orientation recovery's rigid branches (stages/orient.py): for each listed joint j, in order, world[f, j] =
  *     quat_mul(world[f, p], local_rot[f, j]) and positions[f, j] = positions[f, p] + quat_rotate(world[f, p],

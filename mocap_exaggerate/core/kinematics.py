@@ -112,11 +112,14 @@ def link_vectors(positions: np.ndarray, parents: np.ndarray) -> np.ndarray:
     return positions[:, 1:] - np.take(positions, np.asarray(parents)[1:], axis=1)
 
 
-def consecutive(indices: np.ndarray) -> np.ndarray | slice:
-    """``indices`` as a slice where they are consecutive (a limb's rubber chain is), else as they are: an
-    array indexed by it is a view, changed in place, not gathered and put back."""
+def consecutive(indices: np.ndarray, size: int) -> np.ndarray | slice:
+    """Integer ``indices`` into an axis of ``size`` as a slice where they are consecutive and within it (a limb's
+    rubber chain is), else as they are (negative, past the end, a mask: indexing says what they mean, or raises):
+    an array indexed by the slice is a view, changed in place, not gathered and put back."""
     indices = np.asarray(indices)
-    if indices.ndim == 1 and len(indices) and np.array_equal(indices, np.arange(indices[0], indices[0] + len(indices))):
+    if (indices.ndim == 1 and len(indices) and np.issubdtype(indices.dtype, np.integer) and 0 <= indices[0]
+            and indices[0] + len(indices) <= size
+            and np.array_equal(indices, np.arange(indices[0], indices[0] + len(indices)))):
         return slice(int(indices[0]), int(indices[0]) + len(indices))
     return indices
 

@@ -43,6 +43,7 @@ __all__ = [
     "unit_track",
     "cross",
     "vector_norm",
+    "sum_last",
 ]
 
 
@@ -390,6 +391,7 @@ def _euler_from_quat(q: np.ndarray, order: str) -> np.ndarray:
     arbitrary: callers settle them. Only the five entries of ``R`` read are made, each by
     `_matrix_entry`, as `quat_to_matrix` makes them (the same bits as from the whole matrix, 40 % less work).
     """
+    q = np.asarray(q)
     i, j, k, sign = _axes(order)
     if _kernels is not None and q.dtype == np.float64 and q.size:  # the entries in one compiled pass, the same bits
         q = np.ascontiguousarray(q)
@@ -544,8 +546,8 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
 
 
 def _sum3(values: np.ndarray) -> np.ndarray:
-    """``values.sum(axis=-1)`` over a last axis of three, in NumPy's order (first two, then the
-    third: the same bits), at a third of its time (a reduction over three is mostly overhead)."""
+    """``values.sum(axis=-1)`` over a last axis of three of values that are never -0.0 (absolute values), in
+    NumPy's order (first two, then the third: the same bits), at a third of its time (`sum_last` for any)."""
     return (values[..., 0] + values[..., 1]) + values[..., 2]
 
 
@@ -554,7 +556,7 @@ def sum_last(values: np.ndarray, *, keepdims: bool = False) -> np.ndarray:
     NumPy adds the values one after the other to 0.0, as this does by element-wise passes (a reduction over
     three or four is mostly overhead: half its time). Longer axes go to NumPy."""
     values = np.asarray(values)
-    if not 1 < values.shape[-1] < 8 or values.dtype != np.float64:
+    if values.ndim == 0 or not 1 < values.shape[-1] < 8 or values.dtype != np.float64:
         return np.sum(values, axis=-1, keepdims=keepdims)
     total = values[..., 0] + values[..., 1]
     for i in range(2, values.shape[-1]):

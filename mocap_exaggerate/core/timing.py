@@ -201,7 +201,7 @@ def soft_limit(value: np.ndarray, knee: np.ndarray, top: np.ndarray) -> np.ndarr
     """
     value, knee, top = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (value, knee, top)))
     out = np.array(value, order="C")  # (most values are under the knee: the tanh is taken only of those over it)
-    over = np.flatnonzero(value - knee > 0)
+    over = np.flatnonzero(~(value - knee <= 0))  # (a NaN difference too, as the formula takes it)
     if len(over):
         value, knee, top = value.ravel()[over], knee.ravel()[over], top.ravel()[over]
         room = top - knee

@@ -96,7 +96,6 @@ def keep_bends_on_rubber(sub_positions: np.ndarray, hierarchy, captured: np.ndar
             continue
         upper = np.flatnonzero(hierarchy.link_child == middle)  # the middle joint and the sub-joints above it
         lower = np.flatnonzero((hierarchy.link_child == end) & ~hierarchy.is_original)
-        out[:, consecutive(upper)] += hierarchy.fraction[upper][None, :, None] * shift[:, None]
-        out[:, consecutive(lower)] += (1.0 - hierarchy.fraction[lower])[None, :, None] * shift[:, None]
+        out[:, consecutive(upper, out.shape[1])] += hierarchy.fraction[upper][None, :, None] * shift[:, None]
+        out[:, consecutive(lower, out.shape[1])] += (1.0 - hierarchy.fraction[lower])[None, :, None] * shift[:, None]
     return out
-

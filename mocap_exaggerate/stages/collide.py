@@ -330,7 +330,7 @@ def unbend_hinges(out: np.ndarray, hierarchy, limbs: dict, poles: dict[str, tupl
 def move_middle(out: np.ndarray, chain: np.ndarray, middle: int, move: np.ndarray) -> None:
     """Move a chain's middle joint by ``move (F, 3)`` (in place), its base and end staying: the sub-joints on
     its two links move by their share of the way (along the chain) from the base or the end to it."""
-    run = consecutive(chain)
+    run = consecutive(chain, out.shape[1])
     points = out[:, run]
     steps = vector_norm(np.diff(points, axis=1))
     at = np.concatenate([np.zeros((len(out), 1)), np.cumsum(steps, axis=1)], axis=1)

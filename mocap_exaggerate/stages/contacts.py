@@ -960,7 +960,7 @@ def _move_end(out: np.ndarray, hierarchy, effector: Effector, goal: np.ndarray, 
     frames = np.flatnonzero(np.any(np.abs(goal - end) > 0, axis=-1))
     if not len(frames):
         return
-    run = consecutive(chain)
+    run = consecutive(chain, out.shape[1])
     points = out[frames, run] if isinstance(run, slice) else out[frames][:, chain]
     if len(chain) != 3:
         deformed = laplacian_deform(points, goal[frames], rest[chain])

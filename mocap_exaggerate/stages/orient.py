@@ -170,7 +170,8 @@ def recover_orientations(
             v = now[:, targets] - now[:, j : j + 1]
             part[:, j] = quat_mul(_fit_turn(u, v, centre), turned[:, j])
         part[:, kept] = turned[:, kept]
-        if single_joint and compiled:  # every joint turned by a single link, in one compiled pass: the same bits
+        if single_joint and compiled and placed.dtype == np.float64 and placed.flags.c_contiguous:  # every joint
+            # turned by a single link, in one compiled pass: the same bits
             _kernels.single_turns(was, now, turned, part, *single, len(part), skeleton.num_joints, len(single_joint))
         elif single_joint:  # one vectorised call for them all
             turn = quat_between(was[:, single_to] - was[:, single_from], now[:, single_to] - now[:, single_from])

@@ -290,7 +290,7 @@ def simulate_springs(
     active: np.ndarray | None = None,
     links: SpringLinks | None = None,
     compiled: bool = True,
-    out: np.ndarray | None = None,
+    into: np.ndarray | None = None,
 ) -> np.ndarray:
     """Blend the suspended particles' motion into ``positions``.
 
@@ -305,17 +305,18 @@ def simulate_springs(
     links : the topology from `spring_links` (computed from parents and active when None)
     compiled : False runs the plain per-particle Python loop (the test oracle); True the time loop in
         ``core/_kernels.c`` where it was built, else the NumPy one
-    out : a float64 array holding ``positions``' values (not the same memory), to write the result into
-        instead of a copy (only the suspended joints are written)
+    into : a float64 array holding ``positions``' values (``positions`` itself, or a copy the caller keeps),
+        to write the result into instead of a copy: only the suspended joints are written in it
 
     Returns
     -------
-    (F, J, 3) float64 (``out`` when given). ``blend == 0`` returns a copy; a still pose stays still.
+    (F, J, 3) float64 (``into`` when given). ``blend == 0`` returns a copy (or ``into`` as it was); a still
+    pose stays still.
     """
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim != 3 or positions.shape[-1] != 3:
         raise ValueError(f"positions must be (F, J, 3), got {positions.shape}")
-    out = positions.copy() if out is None else out
+    out = positions.copy() if into is None else into
     blend = np.asarray(blend, dtype=np.float64)
     if not np.any(blend) or positions.shape[0] < 2:
         return out
@@ -353,7 +354,7 @@ def springs_stage(state: State, config: SpringConfig) -> State:
     out = positions.copy()
     simulate_springs(
         positions[state.first:], parents, frame_time, stiffness=config.stiffness,
-        link_stiffness=config.link_stiffness, damping=config.damping, blend=blend, links=links, out=out[state.first:],
+        link_stiffness=config.link_stiffness, damping=config.damping, blend=blend, links=links, into=out[state.first:],
     )
     # The knees' and elbows' lag may carry them behind the line again: bend them back.
     hinges = limb_hinges(state.motion.skeleton, state.limbs)
@@ -441,7 +442,8 @@ def _limit_block(positions: np.ndarray, before: np.ndarray, parents: np.ndarray,
         return
     # Each joint's move: its parent's, plus its own link's shortening (joint by joint, each a contiguous
     # block of the frames that move). A shift is never -0.0 (the root's is +0.0, and a sum is -0.0 only of
-    # two), so a link that is not limited adds nothing to its parent's.
+    # two), so a link that is not limited adds nothing to its parent's. (Not even a NaN for an infinite link,
+    # which 0 times it made once: such a clip is refused by the writer either way.)
     own = np.ascontiguousarray(((scale[rows] - 1.0)[..., None] * vectors[rows]).transpose(1, 0, 2))
     shift = np.zeros((len(parents), len(rows), 3))
     of = dict(zip(ends.tolist(), range(len(ends))))
