@@ -11,6 +11,7 @@ from __future__ import annotations
 import errno
 import functools
 import logging
+import re
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -33,6 +34,8 @@ INTERNAL_ERROR = 3
 _LONGEST_USAGE = 300
 #: Characters of any other error's message shown before it is cut short.
 _LONGEST_MESSAGE = 500
+#: A run of digits past this many is shown as its first 20 and its length (a 309-digit integer says nothing more).
+_LONG_NUMBER = re.compile(r"\d{40,}")
 
 
 class UserError(click.ClickException):
@@ -85,7 +88,7 @@ def emit(text: str, *, nl: bool = True) -> None:
 def one_line(message: str, most: int = _LONGEST_MESSAGE) -> str:
     """``message`` as one printable line: line breaks, control characters and undecodable bytes
     escaped as Python writes them (``\\n``, ``\\udcff``), cut short past ``most`` characters."""
-    text = printable(message)
+    text = _LONG_NUMBER.sub(lambda m: f"{m.group(0)[:20]}... ({len(m.group(0))} digits)", printable(message))
     return text if len(text) <= most else f"{text[:most]}... ({len(text)} characters)"
 
 

@@ -1014,3 +1014,53 @@ def test_a_json_reader_gone_before_the_first_clip_is_said_too(tmp_path):
         os.close(write)
     assert done.returncode == 1 and "Traceback" not in done.stderr and "Aborted" not in done.stderr, done.stderr
     assert "standard output closed" in done.stderr and "1 file(s) not done" in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize("greeting", [b"\xff" * 100_000, struct.pack("<QQQ", 1, 1, 2**62), struct.pack("<QQQ", 2**62, 1, 5)],
+                         ids=["a flood of bytes", "a count of one frame of 2**62 bytes", "a size of 2**62"])
+def test_a_port_that_sends_what_dask_does_not_is_refused_in_one_line(tmp_path, greeting):
+    # Each reached Dask's own reader and ended in an internal error (a struct or "maximum dimension" error, exit 3).
+    import socket
+    import threading
+    import time
+
+    pytest.importorskip("distributed", reason="Dask distributed is not installed")
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(5)
+    port = listener.getsockname()[1]
+
+    def serve():
+        while True:
+            try:
+                connection, _ = listener.accept()
+            except OSError:
+                return
+            try:
+                connection.sendall(greeting)
+            except OSError:
+                pass
+
+    threading.Thread(target=serve, daemon=True).start()
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in" / "a.bvh").write_bytes(CLIP.read_bytes())
+    try:
+        start = time.monotonic()
+        done = run("batch", tmp_path / "in", tmp_path / "out", "--scheduler", f"tcp://127.0.0.1:{port}", "--no-glb")
+        took = time.monotonic() - start
+    finally:
+        listener.close()
+    assert done.returncode == 2 and "not a Dask scheduler" in done.stderr, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and took < 10 + 5
+
+
+@pytest.mark.parametrize("option", [["--stretch", "left_leg:1e308s-2:2"], ["--stretch", "left_leg:1-1e308s:2"],
+                                    ["--stretch", "left_leg:1-2:2:release=1e308s"], ["--target", "lfoot@1e308s"],
+                                    ["--sigma", "9" * 5000 + "f"], ["--set", "correct.max_iter=1e308"]])
+def test_durations_and_numbers_past_any_float_are_one_short_line(tmp_path, option):
+    # 1e308 seconds at 120 fps is past any float: an OverflowError (exit 3) turning it into a frame number; a
+    # 309-digit or 5,000-digit number was quoted whole.
+    done = run("exaggerate", SAMPLE_DIR / "cmu_16_01_jump_amc2bvh.bvh", "-o", tmp_path / "out", *option)
+    assert done.returncode == 2 and done.stderr.startswith("Error:"), done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and len(done.stderr) < 300, done.stderr
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())

@@ -28,20 +28,17 @@ def parse_duration(value: str | float | int, frame_time: float, *, what: str = "
     """A duration in frames from ``0.2``/``"0.2s"`` (seconds), ``"200ms"`` or ``"18f"`` (frames)."""
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         seconds = float(value)
-        if not np.isfinite(seconds) or seconds < 0:
+        if not np.isfinite(seconds) or seconds < 0 or not np.isfinite(seconds / frame_time):
             raise ConfigError(f"{what} must be a duration >= 0, got {value!r}")
         return seconds / frame_time
     match = _DURATION.match(str(value))
     if not match:
         raise ConfigError(f"{what} must look like 0.2s, 200ms or 18f, got {value!r}")
     number, unit = float(match.group(1)), (match.group(2) or "s")
-    if not np.isfinite(number):
+    frames = number / frame_time if unit == "s" else number / 1000.0 / frame_time if unit == "ms" else number
+    if not (np.isfinite(number) and np.isfinite(frames)):  # (1e308s at 120 fps is past any float)
         raise ConfigError(f"{what} must be a finite duration, got {value!r}")
-    if unit == "s":
-        return number / frame_time
-    if unit == "ms":
-        return number / 1000.0 / frame_time
-    return number
+    return frames
 
 
 def check_duration(value: str | float | int, what: str, most_seconds: float = 10.0) -> None:
@@ -79,7 +76,10 @@ def parse_frame(value: str | float | int, frame_time: float, *, what: str) -> in
         return int(text)
     if not re.search(r"(s|ms|f|frames?)$", text):
         raise ConfigError(f"{what} must be a frame number or a time such as 1.2s, got {value!r}")
-    return int(round(parse_duration(text, frame_time, what=what)))
+    frames = parse_duration(text, frame_time, what=what)
+    if abs(frames) > 1e18:  # (past any clip: and a float past 2**63 is no frame number)
+        raise ConfigError(f"{what} {text[:20]}{'...' if len(text) > 20 else ''} is past the end of any clip")
+    return int(round(frames))
 
 
 

@@ -115,6 +115,9 @@ def connect_dask(scheduler: str, jobs: int = 1):
         client = Client(scheduler, timeout=10)
     except (OSError, TimeoutError) as error:
         raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: {error}") from None
+    except Exception as error:  # what it sent was not Dask's (a struct or msgpack error from deep in Dask)
+        raise ConfigError(f"--scheduler {scheduler}: what listens there does not speak Dask's protocol "
+                          f"({type(error).__name__}); not a Dask scheduler") from None
     try:
         client.wait_for_workers(1, timeout=WAIT_FOR_WORKERS)
     except TimeoutError:
@@ -129,6 +132,8 @@ def connect_dask(scheduler: str, jobs: int = 1):
 
 #: Seconds a scheduler has to greet a connection, as a Dask scheduler does at once.
 GREETING = 8.0
+#: The most bytes a Dask scheduler's greeting (its handshake) is taken to be.
+_GREETING_MOST = 1 << 20
 
 
 def _speaks_dask(scheduler: str) -> None:
@@ -139,18 +144,32 @@ def _speaks_dask(scheduler: str) -> None:
 
     host, port = scheduler[len("tcp://"):].rstrip("/").rsplit(":", 1)
     host = host.strip("[]")
+    import time
+
+    first = b""
     try:
         with socket.create_connection((host, int(port)), timeout=GREETING) as probe:
-            probe.settimeout(GREETING)
-            first = probe.recv(1)
+            deadline = time.monotonic() + GREETING
+            while len(first) < 16:  # the greeting's first two numbers (its size, its frames)
+                probe.settimeout(max(deadline - time.monotonic(), 0.001))
+                more = probe.recv(16 - len(first))
+                if not more:
+                    break
+                first += more
     except TimeoutError:
         raise ConfigError(f"--scheduler {scheduler}: what listens there did not answer as a Dask scheduler "
                           f"within {GREETING:g} s") from None
     except OSError as error:
         raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: "
                           f"{error.strerror or error}") from None
-    if not first:
+    if len(first) < 16:
         raise ConfigError(f"--scheduler {scheduler}: what listens there closed the connection; not a Dask scheduler")
+    # A Dask message starts with its size and its count of frames (distributed.comm.tcp): a handshake is a few
+    # hundred bytes in a few frames. Anything else (a flood of bytes, a size of 2**62) is not Dask's.
+    size, frames = int.from_bytes(first[:8], "little"), int.from_bytes(first[8:], "little")
+    if not (16 <= size <= _GREETING_MOST and 1 <= frames <= 64):
+        raise ConfigError(f"--scheduler {scheduler}: what listens there does not speak Dask's protocol; "
+                          f"not a Dask scheduler")
 
 
 def run_on_dask(clips: list[Clip], out_dir: str | os.PathLike, options: BatchOptions, parameters: str, *,
