@@ -232,6 +232,17 @@ def ctrl_c_held() -> Iterator[None]:
             os.kill(os.getpid(), signal.SIGINT)  # what it would have done: end the process
 
 
+def _ended(pid: int) -> bool:
+    """Whether process ``pid`` has ended and waits to be reaped (a zombie; Linux's ``/proc`` tells, elsewhere
+    False): a caller that reads the batch's output to its end before reaping it would wait for ever on the
+    workers, who hold the batch's stdout and stderr."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as stat:
+            return stat.read().rpartition(b")")[2].split()[0] in (b"Z", b"X")
+    except (OSError, IndexError):
+        return False
+
+
 def _worker_start(batch_pid: int) -> None:
     """In each worker: Ctrl-C is the batch's to handle (it lets running clips finish), and the
     worker ends itself when the batch process is gone (killed with SIGKILL, say), instead of
@@ -255,5 +266,7 @@ def _worker_start(batch_pid: int) -> None:
                 os._exit(1)
             except PermissionError:  # alive, only not ours to signal
                 pass
+            if _ended(batch_pid):  # a zombie still takes signals: killed, not yet reaped by whoever started it
+                os._exit(1)
 
     threading.Thread(target=watch, name="batch-watch", daemon=True).start()
