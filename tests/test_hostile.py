@@ -11,6 +11,7 @@ folder as it was (not even created). The cases are the ones a review found
 from __future__ import annotations
 
 import json
+import os
 import struct
 import subprocess
 import sys
@@ -1064,3 +1065,86 @@ def test_durations_and_numbers_past_any_float_are_one_short_line(tmp_path, optio
     assert done.returncode == 2 and done.stderr.startswith("Error:"), done.stderr
     assert len(done.stderr.strip().splitlines()) == 1 and len(done.stderr) < 300, done.stderr
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def _gltf_skeleton(path, joints: int, *, chain: bool = False, seconds: float = 1.0, uri: str | None = None) -> None:
+    """A small glTF: a skinned triangle on ``joints`` joints (a star, or a ``chain``), one animation of
+    ``seconds``; its buffer a data URI, or the file ``uri`` beside it."""
+    import base64
+
+    data, views, accessors = bytearray(), [], []
+
+    def add(values, component, kind):
+        values = np.ascontiguousarray(values)
+        views.append({"buffer": 0, "byteOffset": len(data), "byteLength": values.nbytes})
+        data.extend(values.tobytes())
+        while len(data) % 4:
+            data.append(0)
+        accessors.append({"bufferView": len(views) - 1, "componentType": component, "count": len(values), "type": kind})
+        return len(accessors) - 1
+
+    position = add(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32), 5126, "VEC3")
+    accessors[position].update({"min": [0, 0, 0], "max": [1, 1, 0]})
+    weights = add(np.array([[1, 0, 0, 0]] * 3, np.float32), 5126, "VEC4")
+    bones = add(np.zeros((3, 4), np.uint16), 5123, "VEC4")
+    times = add(np.array([0.0, seconds], np.float32), 5126, "SCALAR")
+    accessors[times].update({"min": [0.0], "max": [seconds]})
+    turns = add(np.array([[0, 0, 0, 1], [0, 0, 0.6, 0.8]], np.float32), 5126, "VEC4")
+    nodes = [{"mesh": 0, "skin": 0}] + [{"name": f"j{k}", "translation": [0, 1, 0] if k else [0, 0, 0]}
+                                         for k in range(joints)]
+    for k in range(1, joints):
+        nodes[k if chain else 1].setdefault("children", []).append(k + 1)
+    buffer = {"byteLength": len(data)}
+    buffer["uri"] = uri or "data:application/octet-stream;base64," + base64.b64encode(bytes(data)).decode()
+    path.write_text(json.dumps({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}], "nodes": nodes,
+        "meshes": [{"primitives": [{"attributes": {"POSITION": position, "JOINTS_0": bones, "WEIGHTS_0": weights}}]}],
+        "skins": [{"joints": list(range(1, joints + 1))}],
+        "animations": [{"name": "a", "samplers": [{"input": times, "output": turns}],
+                        "channels": [{"sampler": 0, "target": {"node": joints, "path": "rotation"}}]}],
+        "buffers": [buffer], "bufferViews": views, "accessors": accessors}))
+
+
+def test_a_small_gltf_passes_and_its_caps_are_the_bvh_readers(tmp_path):
+    # The glTF reader skipped the joint, depth and joint-frame caps: 2,500 joints converted, a 1,500-deep chain
+    # was read, a 50,000-node file took minutes in pygltflib, 1,999 joints of 390,001 frames asked for 93 GiB.
+    ok = tmp_path / "ok.gltf"
+    _gltf_skeleton(ok, 5)
+    assert run("info", ok).returncode == 0
+    for name, joints, chain, seconds, said in (
+            ("star.gltf", 2500, False, 1.0, "the skin has 2500 joints; at most 2000"),
+            ("chain.gltf", 1500, True, 1.0, "1500 joints deep; at most 1000"),
+            ("nodes.gltf", 6000, True, 1.0, "the file has 6,001 nodes; at most 5,000"),
+            ("long.gltf", 1999, False, 13000.0, "at most 30,000,000 joints times frames")):
+        _gltf_skeleton(tmp_path / name, joints, chain=chain, seconds=seconds)
+        done = run("exaggerate", tmp_path / name, "-o", tmp_path / "out")
+        assert done.returncode == 2 and said in done.stderr and len(done.stderr.splitlines()) == 1, done.stderr
+        assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs here")
+def test_a_gltf_buffer_is_read_as_every_file_is(tmp_path):
+    # A buffer file beside the glTF was read whole, whatever it was: a FIFO blocked for ever, 3 GiB took 3 GB.
+    fifo = tmp_path / "fifo.gltf"
+    _gltf_skeleton(fifo, 3, uri="pipe.bin")
+    os.mkfifo(tmp_path / "pipe.bin")
+    sparse = tmp_path / "sparse.gltf"
+    _gltf_skeleton(sparse, 3, uri="big.bin")
+    with open(tmp_path / "big.bin", "wb") as big:
+        big.truncate((1 << 30) + 1)
+    for path, said in ((fifo, "is a FIFO, not a glTF buffer"), (sparse, "a glTF buffer is read up to 1 GiB")):
+        done = subprocess.run([sys.executable, "-m", "mocap_exaggerate_cli.main", "info", str(path)],
+                              capture_output=True, text=True, timeout=60)
+        assert done.returncode == 2 and said in done.stderr and len(done.stderr.splitlines()) == 1, done.stderr
+
+
+def test_a_bvh_of_more_joints_times_frames_than_a_run_can_hold_is_refused_at_its_frames_line(tmp_path):
+    # 100 joints of 400,000 frames (each within its own cap) is 40 million joint-frames, about 24 GB at work.
+    path = _star_bvh(100)
+    text = path.read_text().replace("Frames: 6", "Frames: 400000")
+    (tmp_path / "many.bvh").write_text(text)
+    done = run("exaggerate", tmp_path / "many.bvh", "-o", tmp_path / "out")
+    assert done.returncode == 2 and "at most 30,000,000 joints times frames" in done.stderr, done.stderr
+    line = next(k for k, row in enumerate(text.splitlines(), 1) if row.startswith("Frames:"))
+    assert f"many.bvh:{line}:" in done.stderr and not (tmp_path / "out").exists()
+    assert run("info", path).returncode == 0  # (the same star of 6 frames reads)

@@ -70,6 +70,9 @@ MAX_JOINTS = 2000
 #: Most frames read: 500,000 is 69 minutes at 120 fps, past any take; a run holds 17-20 kB a frame
 #: of a 31-joint rig at its peak, so a longer clip is cut into takes first (refused in one line before any work).
 MAX_FRAMES = 500_000
+#: Most joints times frames read: a run holds about 0.45 kB a joint a frame at its peak (0.6 kB resident), so
+#: 30 million (500,000 frames of 60 joints, 15,000 of 2,000) is about 18 GB; more is cut into takes first.
+MAX_JOINT_FRAMES = 30_000_000
 
 #: How position channels are read (see `read_bvh`), and the up axes one can give.
 ROOT_OFFSET_MODES = ("auto", "replace", "add")
@@ -189,6 +192,10 @@ def read_bvh(
                 shown = _short_number(count)
                 raise InputError(f"'Frames: {shown}': at most {MAX_FRAMES:,} frames are read (cut the take into "
                                  f"shorter clips)", source=label, line=line_no)
+            if declared_frames * skeleton.num_joints > MAX_JOINT_FRAMES:
+                raise InputError(f"'Frames: {declared_frames}' of {skeleton.num_joints} joints: at most "
+                                 f"{MAX_JOINT_FRAMES:,} joints times frames are read (cut the take into shorter clips)",
+                                 source=label, line=line_no)
             frames_line = line_no
         else:
             m = _FRAME_TIME_RE.match(line)

@@ -29,6 +29,7 @@ from ..core.kinematics import local_from_world
 from ..core.motion import Motion
 from ..core.rotations import quat_from_matrix, quat_normalize, quat_slerp
 from ..core.skeleton import Skeleton
+from .bvh import MAX_DEPTH, MAX_JOINT_FRAMES, MAX_JOINTS
 from .bvh import MAX_FRAMES as BVH_MAX_FRAMES
 from .skin import _node_local, _skinned_piece, _unique_names, _world_matrices, open_gltf
 
@@ -128,9 +129,18 @@ def _read(path, fps: float | None, clip: str, label: str) -> tuple[Motion, GltfR
     animation = animations[chosen]
 
     rest_world, parent = _world_matrices(nodes, label)
+    if len(joints) > MAX_JOINTS:  # (the BVH reader's cap)
+        raise InputError(f"the skin has {len(joints)} joints; at most {MAX_JOINTS} are read", source=label)
     order = _tree(joints, parent, label)  # every node of the skeleton, parents before children
+    if len(order) > MAX_JOINTS:
+        raise InputError(f"the skeleton has {len(order)} nodes; at most {MAX_JOINTS} joints are read", source=label)
     index = {node: k for k, node in enumerate(order)}
     parents = np.array([index.get(int(parent[node]), -1) if k else -1 for k, node in enumerate(order)])
+    depth = np.zeros(len(order), dtype=np.int64)
+    for k in range(1, len(order)):  # (parents before children)
+        depth[k] = depth[parents[k]] + 1 if parents[k] >= 0 else 0
+    if depth.max() >= MAX_DEPTH:
+        raise InputError(f"the skeleton is {int(depth.max()) + 1} joints deep; at most {MAX_DEPTH} are read", source=label)
 
     # Keys: each channel's sampler, by node and path.
     tracks: dict[tuple[int, str], tuple[np.ndarray, np.ndarray, str]] = {}
@@ -162,6 +172,9 @@ def _read(path, fps: float | None, clip: str, label: str) -> tuple[Motion, GltfR
     if count > MAX_FRAMES:
         raise InputError(f"animation {names[chosen]!r} at {rate:g} fps is {count} frames; at most {MAX_FRAMES}",
                          source=label)
+    if count * len(order) > MAX_JOINT_FRAMES:
+        raise InputError(f"animation {names[chosen]!r} at {rate:g} fps is {count} frames of {len(order)} joints; at "
+                         f"most {MAX_JOINT_FRAMES:,} joints times frames are read", source=label)
     times = start + np.arange(count) / rate
 
     # World transforms of every node of the skeleton at every frame, down the tree.

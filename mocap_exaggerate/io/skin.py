@@ -150,6 +150,28 @@ def _read_obj_group(path: Path, group: str) -> tuple[np.ndarray, np.ndarray]:
     return np.array(vertices, dtype=np.float64), np.array(faces, dtype=np.int64)
 
 
+#: Most nodes a glTF/GLB file may have (joints, meshes and the rest): a character has a few hundred; the
+#: skeleton is held to the BVH reader's 2,000 joints.
+MAX_NODES = 5000
+
+
+def _node_count(path: str | os.PathLike) -> int:
+    """How many nodes the file's JSON lists, read before pygltflib reads it (0 where the JSON cannot be read:
+    pygltflib then says what is wrong)."""
+    try:
+        with open(path, "rb") as stream:
+            head = stream.read(20)
+            if head[:4] == b"glTF":  # GLB: a 12-byte header, then the JSON chunk's length and type
+                length = struct.unpack_from("<I", head, 12)[0]
+                text = stream.read(min(length, LIMITS["character"]))
+            else:
+                text = head + stream.read(LIMITS["character"])
+        nodes = json.loads(text).get("nodes") or []
+        return len(nodes) if isinstance(nodes, list) else 0
+    except (OSError, ValueError, RecursionError, AttributeError, struct.error):
+        return 0
+
+
 def open_gltf(path: str | os.PathLike):
     """A glTF/GLB file and a function reading its accessor ``index`` as a ``(count, width)`` array.
 
@@ -164,6 +186,9 @@ def open_gltf(path: str | os.PathLike):
             raise InputError(f"is over {LIMITS['character'] >> 30} GiB; a character is read up to that", source=label)
     except OSError as error:
         raise InputError(f"cannot read ({error.strerror or error})", source=label) from None
+    nodes = _node_count(path)
+    if nodes > MAX_NODES:  # (pygltflib makes an object of each: 50,000 nodes took 21 s before any check)
+        raise InputError(f"the file has {nodes:,} nodes; at most {MAX_NODES:,} are read", source=label)
     try:
         gltf = gl.GLTF2().load(str(path))
     except Exception as error:  # pygltflib raises many kinds on bad files
@@ -469,8 +494,8 @@ def _buffer_data(uri: str | None, folder: Path, label: str) -> bytes:
     target = (folder / relative).resolve()
     if relative.is_absolute() or "://" in uri or not target.is_relative_to(folder.resolve()):
         raise InputError(f"buffer uri {uri[:60]!r} points outside the glTF's folder", source=label)
-    try:
-        return target.read_bytes()
+    try:  # a regular file, as every file read is, and no larger than a character may be (a FIFO blocked for ever)
+        return read_limited(target, limit=LIMITS["character"], what="glTF buffer", label=f"{label}: buffer {uri[:60]!r}")
     except OSError as error:
         raise InputError(f"buffer {uri[:60]!r}: {error.strerror or error}", source=label) from None
 
