@@ -1067,7 +1067,8 @@ def test_durations_and_numbers_past_any_float_are_one_short_line(tmp_path, optio
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
 
 
-def _gltf_skeleton(path, joints: int, *, chain: bool = False, seconds: float = 1.0, uri: str | None = None) -> None:
+def _gltf_skeleton(path, joints: int, *, chain: bool = False, seconds: float = 1.0, uri: str | None = None,
+                   turns=((0, 0, 0, 1), (0, 0, 0.6, 0.8))) -> None:
     """A small glTF: a skinned triangle on ``joints`` joints (a star, or a ``chain``), one animation of
     ``seconds``; its buffer a data URI, or the file ``uri`` beside it."""
     import base64
@@ -1089,7 +1090,7 @@ def _gltf_skeleton(path, joints: int, *, chain: bool = False, seconds: float = 1
     bones = add(np.zeros((3, 4), np.uint16), 5123, "VEC4")
     times = add(np.array([0.0, seconds], np.float32), 5126, "SCALAR")
     accessors[times].update({"min": [0.0], "max": [seconds]})
-    turns = add(np.array([[0, 0, 0, 1], [0, 0, 0.6, 0.8]], np.float32), 5126, "VEC4")
+    turns = add(np.array(turns, np.float32), 5126, "VEC4")
     nodes = [{"mesh": 0, "skin": 0}] + [{"name": f"j{k}", "translation": [0, 1, 0] if k else [0, 0, 0]}
                                          for k in range(joints)]
     for k in range(1, joints):
@@ -1148,3 +1149,18 @@ def test_a_bvh_of_more_joints_times_frames_than_a_run_can_hold_is_refused_at_its
     line = next(k for k, row in enumerate(text.splitlines(), 1) if row.startswith("Frames:"))
     assert f"many.bvh:{line}:" in done.stderr and not (tmp_path / "out").exists()
     assert run("info", path).returncode == 0  # (the same star of 6 frames reads)
+
+
+def test_zero_rotation_keys_and_complex_vertices_are_one_line_not_a_warning(tmp_path):
+    # All-zero rotation keys printed NumPy's divide warning (three lines, an internal path) before the error;
+    # complex vertices were taken with their imaginary part dropped (a ComplexWarning, exit 0).
+    zero = tmp_path / "zero.gltf"
+    _gltf_skeleton(zero, 3, turns=((0, 0, 0, 0), (0, 0, 0, 0)))
+    done = run("info", zero)
+    assert done.returncode == 2 and "not all zero" in done.stderr and len(done.stderr.splitlines()) == 1, done.stderr
+    skin = tmp_path / "complex.npz"
+    np.savez(skin, vertices=np.zeros((3, 3), complex), faces=np.array([[0, 1, 2]]), joint_names=np.array(["Hips"]),
+             joints=np.zeros((3, 1), int), weights=np.ones((3, 1)))
+    done = run("exaggerate", CLIP, "-o", tmp_path / "out", "--skin", skin)
+    assert done.returncode == 2 and "vertices must be real numbers" in done.stderr, done.stderr
+    assert len(done.stderr.splitlines()) == 1 and not (tmp_path / "out").exists()

@@ -161,6 +161,9 @@ def _read(path, fps: float | None, clip: str, label: str) -> tuple[Motion, GltfR
                 or np.any(np.diff(times) < 0):
             raise InputError(f"animation {names[chosen]!r}: node {target.node}'s {target.path} keys are not "
                              f"finite numbers at rising times, one value a key", source=label)
+        if target.path == "rotation" and (values.shape[1:] != (4,) or np.any(np.einsum("kc,kc->k", values, values) == 0)):
+            raise InputError(f"animation {names[chosen]!r}: node {target.node}'s rotation keys must be quaternions "
+                             f"of four numbers, not all zero", source=label)
         tracks[(target.node, target.path)] = (times, values, mode)
         ends.append(times)
     if not tracks:
