@@ -34,8 +34,9 @@ INTERNAL_ERROR = 3
 _LONGEST_USAGE = 300
 #: Characters of any other error's message shown before it is cut short.
 _LONGEST_MESSAGE = 500
-#: A run of digits past this many is shown as its first 20 and its length (a 309-digit integer says nothing more).
-_LONG_NUMBER = re.compile(r"\d{40,}")
+#: A run of digits past this many is shown as its first 20 and its length (a 309-digit integer says nothing more);
+#: not one inside a name (after a letter, an underscore, a dot or a slash): a file is named as it is.
+_LONG_NUMBER = re.compile(r"(?<![\w./\\])\d{40,}")
 
 
 class UserError(click.ClickException):

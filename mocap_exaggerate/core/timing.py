@@ -27,7 +27,10 @@ _DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(s|ms|f|fra
 def parse_duration(value: str | float | int, frame_time: float, *, what: str = "sigma") -> float:
     """A duration in frames from ``0.2``/``"0.2s"`` (seconds), ``"200ms"`` or ``"18f"`` (frames)."""
     if isinstance(value, (int, float)) and not isinstance(value, bool):
-        seconds = float(value)
+        try:
+            seconds = float(value)  # (an integer of 400 digits is past any float)
+        except OverflowError:
+            seconds = float("inf")
         if not np.isfinite(seconds) or seconds < 0 or not np.isfinite(seconds / frame_time):
             raise ConfigError(f"{what} must be a duration >= 0, got {value!r}")
         return seconds / frame_time

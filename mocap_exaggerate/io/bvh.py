@@ -70,7 +70,8 @@ MAX_JOINTS = 2000
 #: Most frames read: 500,000 is 69 minutes at 120 fps, past any take; a run holds 17-20 kB a frame
 #: of a 31-joint rig at its peak, so a longer clip is cut into takes first (refused in one line before any work).
 MAX_FRAMES = 500_000
-#: Most joints times frames read: a run holds about 0.45 kB a joint a frame at its peak (0.6 kB resident), so
+#: Most joints times frames read: a run holds about 0.45 kB a joint a frame at its peak (0.6 kB resident, with the
+#: default sub-joints; more sub-joints a link cost more), so
 #: 30 million (500,000 frames of 60 joints, 15,000 of 2,000) is about 18 GB; more is cut into takes first.
 MAX_JOINT_FRAMES = 30_000_000
 

@@ -73,7 +73,8 @@ class JobRecord:
     notes : what the pipeline did that the user should hear about (rest frames, stretches found)
     manifest : the manifest as written (None when the BVH went to a stream)
     result : the pipeline's result (positions, hierarchy, figures)
-    captured : the input motion as read (what the pictures of a report compare against)
+    captured : the input motion as read (what the pictures of a report compare against); its read Euler
+        angles (``euler_hint``) only where the output is the original skeleton, the one output that uses them
     """
 
     input: str

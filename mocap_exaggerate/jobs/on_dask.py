@@ -115,9 +115,10 @@ def connect_dask(scheduler: str, jobs: int = 1):
         client = Client(scheduler, timeout=10)
     except (OSError, TimeoutError) as error:
         raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: {error}") from None
-    except Exception as error:  # what it sent was not Dask's (a struct or msgpack error from deep in Dask)
-        raise ConfigError(f"--scheduler {scheduler}: what listens there does not speak Dask's protocol "
-                          f"({type(error).__name__}); not a Dask scheduler") from None
+    except Exception as error:  # what it sent was not Dask's (a struct or msgpack error from deep in Dask), or
+        # a scheduler of another version
+        raise ConfigError(f"--scheduler {scheduler}: connecting as a Dask client failed ({type(error).__name__}: "
+                          f"{str(error)[:120]}); not a Dask scheduler, or not of this Dask's version") from None
     try:
         client.wait_for_workers(1, timeout=WAIT_FOR_WORKERS)
     except TimeoutError:

@@ -159,8 +159,10 @@ def recover_orientations(
                 kept.append(j)
 
     single = np.array([single_from, single_to, single_joint], dtype=np.int64).reshape(3, -1)
-    compiled = _kernels is not None and all(a.dtype == np.float64 and a.flags.c_contiguous
-                                            for a in (source_pos, new_pos, source_rot, world))
+    # (the captured transforms are the forward kinematics' joint-major arrays: each half copied into frame order
+    # for the compiled pass, a few ms)
+    compiled = _kernels is not None and all(a.dtype == np.float64 for a in (source_pos, source_rot)) and all(
+        a.dtype == np.float64 and a.flags.c_contiguous for a in (new_pos, world))
 
     def fit(rows: slice, placed: np.ndarray = new_pos) -> None:  # each frame on its own: halves on two cores
         part = world[rows]
@@ -172,7 +174,8 @@ def recover_orientations(
         part[:, kept] = turned[:, kept]
         if single_joint and compiled and placed.dtype == np.float64 and placed.flags.c_contiguous:  # every joint
             # turned by a single link, in one compiled pass: the same bits
-            _kernels.single_turns(was, now, turned, part, *single, len(part), skeleton.num_joints, len(single_joint))
+            _kernels.single_turns(np.ascontiguousarray(was), now, np.ascontiguousarray(turned), part, *single,
+                                  len(part), skeleton.num_joints, len(single_joint))
         elif single_joint:  # one vectorised call for them all
             turn = quat_between(was[:, single_to] - was[:, single_from], now[:, single_to] - now[:, single_from])
             part[:, single_joint] = quat_normalize(quat_mul(turn, turned[:, single_joint]))
@@ -189,7 +192,8 @@ def recover_orientations(
     # Rigid branches: captured local transforms under the recovered parent.
     placed = np.flatnonzero(rigid[1:]) + 1
     local_rot, local_pos = source.local_rotations, source.local_positions
-    if compiled and len(placed) and all(a.dtype == np.float64 and a.flags.c_contiguous for a in (local_rot, local_pos)):
+    if _kernels is not None and len(placed) and all(a.dtype == np.float64 and a.flags.c_contiguous
+                                                    for a in (local_rot, local_pos, world, new_pos)):
         _kernels.rigid_branches(world, new_pos, local_rot, local_pos, placed, skeleton.parents[placed].astype(np.int64),
                                 frames, skeleton.num_joints, len(placed))  # (in one pass: the same bits)
     else:
