@@ -50,7 +50,7 @@ def load_npz_skin(path: str | os.PathLike) -> Skin:
         raise InputError(f"skin .npz lacks {', '.join(sorted(missing))}", source=label)
     for name in ("vertices", "faces", "joints", "weights"):  # (complex vertices lost their imaginary part, warning)
         if name in data and data[name].dtype.kind not in "biuf":
-            raise InputError(f"{name} must be real numbers, got {data[name].dtype}", source=label)
+            raise InputError(f"the skin's {name} must be real numbers, got {data[name].dtype}", source=label)
     names = tuple(str(n) for n in data["joint_names"])
     weights = np.asarray(data["weights"], dtype=np.float64)
     if "joints" in data:
