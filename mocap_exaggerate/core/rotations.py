@@ -524,8 +524,8 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
         # the parity of the flips so far says which solution each frame uses.
         before = first[:-1] if previous is None else np.concatenate([previous[None], first[:-1]])
         now, other = (first[1:], second[1:]) if previous is None else (first, second)
-        near_same = _sum3(np.abs(_wrap_near(now, before) - before))
-        near_other = _sum3(np.abs(_wrap_near(other, before) - before))
+        near_same = sum_last(np.abs(_wrap_near(now, before) - before))
+        near_other = sum_last(np.abs(_wrap_near(other, before) - before))
         flips = np.cumsum(near_other < near_same, axis=0) + parity
         if previous is None:
             flips = np.concatenate([parity[None], flips])
@@ -543,12 +543,6 @@ def euler_blocks(q: np.ndarray, order: str, reference: np.ndarray | None = None,
         elif turns_so_far.any():  # no new turn in this block (never the first: it has none before it)
             chosen -= 360.0 * turns_so_far
         yield chosen.reshape(qs.shape[:1] + lead[1:] + (3,))
-
-
-def _sum3(values: np.ndarray) -> np.ndarray:
-    """``values.sum(axis=-1)`` over a last axis of three of values that are never -0.0 (absolute values), in
-    NumPy's order (first two, then the third: the same bits), at a third of its time (`sum_last` for any)."""
-    return (values[..., 0] + values[..., 1]) + values[..., 2]
 
 
 def sum_last(values: np.ndarray, *, keepdims: bool = False) -> np.ndarray:
